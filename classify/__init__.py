@@ -1,0 +1,1 @@
+"""mdaug.classify (see the issues for what it will hold)."""

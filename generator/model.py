@@ -1,0 +1,160 @@
+"""The vibration model's IF signal and the generator f(x) (SPEC sections 1-2).
+
+One chirp's real IF signal, t = n / fs, n = 0 .. N_s - 1::
+
+    s(t) = sum_k Gamma_k cos(K [R0 + sum_j A_kj cos(w_kj t + phi_kj)] t),  K = 8 pi mu / c0
+
+with w_p = C_p |w_a + w_b| and w_m = C_m |w_a - w_b|. The model is kept as published:
+a model range R0 puts the tone at f = 4 mu R0 / c0, i.e. at chain range 2 R0 (see
+:mod:`mdaug.radar.config`).
+
+f(x) = |FFT_4096 s| over bins 0 .. 2047, then the 400-bin window with the strongest
+bin at index 200, then the named normalisation.
+
+Precision: the carrier phase K R0 t reaches ~1000 rad, so it is always formed in
+float64 and reduced modulo 2 pi before anything is cast to float32; everything else
+(vibration terms, cos, FFT) may run in float32 (``dtype="float32"``), which is
+faster and stays within ~1e-5 of float64 (see tests/benchmarks/generator.py).
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.fft
+
+from ..radar import RadarConfig, centred_slices, check_normalisation, normalise
+from .params import IDX, N_PARAMS, validate_vectors
+
+TWO_PI = 2.0 * np.pi
+EDGE_POLICIES = ("warn", "pad", "error")
+CHUNK = 256  # rows per vectorised block
+
+
+def _wrap(phase: np.ndarray) -> np.ndarray:
+    """Reduce float64 phases to [-pi, pi] (exact enough: |phase| < 1e6 rad here)."""
+    return phase - TWO_PI * np.rint(phase * (1.0 / TWO_PI))
+
+
+def vibration_terms(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Amplitudes, angular frequencies and phases of the four terms of every engine.
+
+    x: (N, 13 * E). Returns three (N, E, 4) float64 arrays, terms ordered a, b, p, m,
+    with the mixing frequencies derived from w_a, w_b and the skews C_p, C_m.
+    """
+    e = x.reshape(x.shape[0], -1, N_PARAMS)
+    wa, wb = e[..., IDX["w_a"]], e[..., IDX["w_b"]]
+    amp = e[..., [IDX["A_a"], IDX["A_b"], IDX["A_p"], IDX["A_m"]]]
+    w = np.stack([wa, wb, e[..., IDX["C_p"]] * np.abs(wa + wb), e[..., IDX["C_m"]] * np.abs(wa - wb)], axis=-1)
+    phi = e[..., [IDX["phi_a"], IDX["phi_b"], IDX["phi_p"], IDX["phi_m"]]]
+    return amp, w, phi
+
+
+def if_signal(x, radar: RadarConfig = RadarConfig(), *, r0=None, phase_offsets=None,
+              bracket_time=None, dtype="float64") -> np.ndarray:
+    """IF samples of a batch of parameter vectors.
+
+    x: (N, 13 E) or (13 E,) parameter vectors; r0: model range in m, scalar or (N,)
+    (default ``radar.model_range_m``); phase_offsets: (N, E, 4) rad added to the
+    term phases (used for ramp-to-ramp advance); bracket_time: None for the model as
+    published (the range bracket is multiplied by t), or a constant time in s that
+    freezes it (the Jacobi-Anger case, used in tests).
+
+    Returns (N, N_s) real samples in ``dtype``.
+    """
+    x = validate_vectors(x, physical=False)
+    n = x.shape[0]
+    dt = np.dtype(dtype)
+    t = np.arange(radar.samples_per_chirp) / radar.sample_rate_hz
+    k = radar.model_k
+    r0 = np.broadcast_to(np.asarray(radar.model_range_m if r0 is None else r0, dtype=np.float64), (n,))
+    carrier = _wrap(k * r0[:, None] * t[None, :]).astype(dt)  # (N, Ns), reduced in float64
+    amp, w, phi = vibration_terms(x)
+    if phase_offsets is not None:
+        phi = phi + phase_offsets
+    bracket_t = t if bracket_time is None else np.full_like(t, float(bracket_time))
+    # w t + phi for every term as one (N*E*4, 2) @ (2, Ns) product: far faster than
+    # a broadcast; phases wrapped first so float32 keeps its resolution.
+    coef = np.stack([w.ravel(), _wrap(phi).ravel()], axis=1).astype(dt)
+    arg = (coef @ np.stack([t, np.ones_like(t)]).astype(dt)).reshape(*w.shape, -1)
+    # displacement d(t) = sum_j A_j cos(w_j t + phi_j): (N, E, Ns)
+    disp = np.einsum("nej,nejs->nes", amp.astype(dt), np.cos(arg, out=arg))
+    phase = carrier[:, None, :] + (k * bracket_t).astype(dt) * disp
+    gamma = x.reshape(n, -1, N_PARAMS)[..., IDX["Gamma"]].astype(dt)
+    return np.einsum("ne,nes->ns", gamma, np.cos(phase, out=phase))
+
+
+def magnitude_spectra(signals: np.ndarray, radar: RadarConfig = RadarConfig()) -> np.ndarray:
+    """|FFT_{fft_points}| of real IF signals (N, N_s), bins 0 .. fft_points/2 - 1."""
+    spec = scipy.fft.rfft(signals, n=radar.fft_points, axis=-1)[:, : radar.n_bins]
+    return np.abs(spec)
+
+
+@dataclass(frozen=True)
+class ProfileInfo:
+    """Where each profile's window sits: peak bin (N,) and zero-filled bins (N,)."""
+
+    peak_bin: np.ndarray
+    n_missing: np.ndarray
+
+
+def _ramp_offsets(x: np.ndarray, ramp: int, radar: RadarConfig) -> np.ndarray | None:
+    if ramp == 0:
+        return None
+    _, w, _ = vibration_terms(x)
+    return w * (ramp * radar.ramp_period_s)
+
+
+def spectra(x, radar: RadarConfig = RadarConfig(), *, r0=None, n_ramps: int = 1,
+            bracket_time=None, dtype="float64") -> np.ndarray:
+    """Magnitude spectra (N, fft_points/2), incoherently averaged over ``n_ramps`` ramps.
+
+    Between consecutive ramps every vibration phase advances by w * ramp_period.
+    """
+    x = validate_vectors(x, physical=False)
+    if int(n_ramps) < 1:
+        raise ValueError(f"n_ramps must be >= 1, got {n_ramps}")
+    total = None
+    for ramp in range(int(n_ramps)):
+        sig = if_signal(x, radar, r0=r0, phase_offsets=_ramp_offsets(x, ramp, radar),
+                        bracket_time=bracket_time, dtype=dtype)
+        mag = magnitude_spectra(sig, radar)
+        total = mag if total is None else total + mag
+    return total / n_ramps if n_ramps > 1 else total
+
+
+def profiles(x, radar: RadarConfig = RadarConfig(), *, r0=None, n_ramps: int = 1,
+             normalisation: str = "peak", dtype="float64", bracket_time=None,
+             on_edge: str = "warn", return_info: bool = False):
+    """f(x): the peak-centred ``radar.slice_length``-bin profiles of a batch.
+
+    x: (N, 13 E) or (13 E,). Returns (N, L) in ``dtype`` (and a :class:`ProfileInfo`
+    with ``return_info``). The strongest bin always sits at index L // 2; when the
+    window reaches past an end of the spectrum the missing bins are zero-filled,
+    never shifted, and ``on_edge`` says what else happens: ``warn`` (default),
+    ``pad`` (silently) or ``error``. An all-zero spectrum gives an all-zero profile.
+    """
+    check_normalisation(normalisation)
+    if on_edge not in EDGE_POLICIES:
+        raise ValueError(f"on_edge must be one of {EDGE_POLICIES}, got {on_edge!r}")
+    x = validate_vectors(x, physical=False)
+    n = x.shape[0]
+    r0 = np.broadcast_to(np.asarray(radar.model_range_m if r0 is None else r0, dtype=np.float64), (n,))
+    windows = np.empty((n, radar.slice_length), dtype=dtype)
+    peak = np.empty(n, dtype=np.int64)
+    n_missing = np.empty(n, dtype=np.int64)
+    for lo in range(0, n, CHUNK):  # chunks keep the (N, E, 4, N_s) temporaries in cache
+        sl = slice(lo, lo + CHUNK)
+        mag = spectra(x[sl], radar, r0=r0[sl], n_ramps=n_ramps, bracket_time=bracket_time, dtype=dtype)
+        peak[sl] = np.argmax(mag, axis=1)
+        windows[sl], n_missing[sl] = centred_slices(mag, peak[sl], radar.slice_length)
+    if n_missing.any() and on_edge != "pad":
+        msg = (f"{int(np.count_nonzero(n_missing))} of {len(peak)} profile(s) peak within "
+               f"{radar.slice_length // 2} bins of the spectrum's end (peak bins "
+               f"{np.unique(peak[n_missing > 0])[:5].tolist()}...); their missing bins are zero-filled")
+        if on_edge == "error":
+            raise ValueError(msg)
+        warnings.warn(msg, RuntimeWarning, stacklevel=2)
+    out = normalise(windows, normalisation).astype(dtype, copy=False)
+    return (out, ProfileInfo(peak, n_missing)) if return_info else out

@@ -1,0 +1,1 @@
+"""mdaug.inference (see the issues for what it will hold)."""

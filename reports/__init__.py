@@ -1,0 +1,1 @@
+"""mdaug.reports (see the issues for what it will hold)."""
