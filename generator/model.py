@@ -52,14 +52,16 @@ def vibration_terms(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def if_signal(x, radar: RadarConfig = RadarConfig(), *, r0=None, phase_offsets=None,
-              bracket_time=None, dtype="float64") -> np.ndarray:
+              bracket_time=None, dtype="float64", carrier_phase=None) -> np.ndarray:
     """IF samples of a batch of parameter vectors.
 
     x: (N, 13 E) or (13 E,) parameter vectors; r0: model range in m, scalar or (N,)
     (default ``radar.model_range_m``); phase_offsets: (N, E, 4) rad added to the
     term phases (used for ramp-to-ramp advance); bracket_time: None for the model as
     published (the range bracket is multiplied by t), or a constant time in s that
-    freezes it (the Jacobi-Anger case, used in tests).
+    freezes it (the Jacobi-Anger case, used in tests); carrier_phase: None, or rad,
+    scalar or (N,), added to every engine's carrier phase K R0 t (the scene
+    simulator's hover drift, 4 pi f_c R / c0, and per-antenna phases).
 
     Returns (N, N_s) real samples in ``dtype``.
     """
@@ -69,7 +71,10 @@ def if_signal(x, radar: RadarConfig = RadarConfig(), *, r0=None, phase_offsets=N
     t = np.arange(radar.samples_per_chirp) / radar.sample_rate_hz
     k = radar.model_k
     r0 = np.broadcast_to(np.asarray(radar.model_range_m if r0 is None else r0, dtype=np.float64), (n,))
-    carrier = _wrap(k * r0[:, None] * t[None, :]).astype(dt)  # (N, Ns), reduced in float64
+    carrier = k * r0[:, None] * t[None, :]
+    if carrier_phase is not None:
+        carrier = carrier + np.broadcast_to(np.asarray(carrier_phase, dtype=np.float64), (n,))[:, None]
+    carrier = _wrap(carrier).astype(dt)  # (N, Ns), reduced in float64
     amp, w, phi = vibration_terms(x)
     if phase_offsets is not None:
         phi = phi + phase_offsets
@@ -149,6 +154,7 @@ def profiles(x, radar: RadarConfig = RadarConfig(), *, r0=None, n_ramps: int = 1
         mag = spectra(x[sl], radar, r0=r0[sl], n_ramps=n_ramps, bracket_time=bracket_time, dtype=dtype)
         peak[sl] = np.argmax(mag, axis=1)
         windows[sl], n_missing[sl] = centred_slices(mag, peak[sl], radar.slice_length)
+        n_missing[sl][mag.max(axis=1) == 0] = 0  # an all-zero spectrum has no peak to be near an end
     if n_missing.any() and on_edge != "pad":
         msg = (f"{int(np.count_nonzero(n_missing))} of {len(peak)} profile(s) peak within "
                f"{radar.slice_length // 2} bins of the spectrum's end (peak bins "
