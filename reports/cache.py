@@ -1,0 +1,57 @@
+"""Stage outputs cached in the study folder, so an interrupted run resumes.
+
+Each stage writes ``DIR/stages/<name>.json`` (and any files it names) atomically,
+tagged with a key computed from the settings it depends on; a rerun with the same
+key loads it instead of recomputing, a changed key recomputes.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from pathlib import Path
+
+from ..radar import atomic_write
+
+
+def settings_key(*parts) -> str:
+    blob = json.dumps(parts, sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+class StageCache:
+    def __init__(self, folder: Path, log=print):
+        self.folder = Path(folder) / "stages"
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.log = log
+        self.timings: dict[str, float] = {}
+        self.resumed: list[str] = []
+
+    def path(self, name: str, suffix: str = ".json") -> Path:
+        return self.folder / f"{name}{suffix}"
+
+    def run(self, name: str, key: str, compute):
+        """Return the cached result of stage ``name`` for ``key``, or compute and store it.
+
+        ``compute()`` returns a JSON-serialisable dict; its wall time is recorded.
+        """
+        path = self.path(name)
+        if path.is_file():
+            try:
+                stored = json.loads(path.read_text())
+            except json.JSONDecodeError:
+                stored = {}
+            if stored.get("key") == key:
+                self.timings[name] = stored["seconds"]
+                self.resumed.append(name)
+                self.log(f"[{name}] cached ({stored['seconds']:.1f} s when computed)")
+                return stored["result"]
+        self.log(f"[{name}] running ...")
+        t0 = time.perf_counter()
+        result = compute()
+        seconds = time.perf_counter() - t0
+        self.timings[name] = seconds
+        text = json.dumps({"key": key, "seconds": seconds, "result": result}, indent=1)
+        atomic_write(path, lambda fh: fh.write(text.encode()))
+        self.log(f"[{name}] done in {seconds:.1f} s")
+        return result
