@@ -1,0 +1,218 @@
+"""The CNN of SPEC section 6, in torch.
+
+Architecture (input: the 400-bin profile reshaped to 1 x 20 x 20)::
+
+    conv 3x3, 32 filters (valid)  -> 32 x 18 x 18, ReLU
+    max pool 2x2                  -> 32 x 9 x 9
+    conv 3x3, 64 filters (valid)  -> 64 x 7 x 7, ReLU
+    average pool 7x7, stride 7    -> 64 x 1 x 1
+    flatten                       -> 64
+    fully connected 64 -> hidden, ReLU
+    fully connected hidden -> n_classes (softmax via the cross-entropy loss)
+
+The SPEC does not give the kernel size; 3x3 "valid" convolutions make the published
+7x7 average pool cover exactly the 7x7 map left after the second convolution.
+
+Training: Adam (lr 1e-3), cross-entropy, ``epochs`` (50) at ``batch_size`` (256);
+the training set is split 80/10/10 (stratified; by ``groups`` when given, so copies
+of one source profile stay in one split); the model with the best validation loss
+is kept; ``patience`` stops early after that many epochs without improvement; the
+10% test split's accuracy is reported in ``split_scores_``.
+
+Speed: channels-last tensors and in-place ReLUs (the ReLU backward on the default
+layout took ~40% of an epoch): ~2.9 s/epoch on 25,600 profiles at batch 256 on one
+thread here (vs ~4.7 s with the default layout).
+
+Determinism: weights, split and shuffles come from ``random_state`` (torch
+generators seeded from it, the global torch RNG is untouched); on one thread the
+same seed gives the same model.
+"""
+from __future__ import annotations
+
+import contextlib
+import copy
+import math
+import time
+
+import numpy as np
+import torch
+from torch import nn
+from tqdm.auto import tqdm
+
+from .base import ProfileClassifier, derive_seed
+
+SIDE = 20
+
+
+class ProfileCNN(nn.Module):
+    """The SPEC's network; input (N, 1, 20, 20), output logits (N, n_classes)."""
+
+    def __init__(self, n_classes: int, hidden: int = 64, conv1: int = 32, conv2: int = 64):
+        super().__init__()
+        self.features = nn.Sequential(
+            nn.Conv2d(1, conv1, 3), nn.ReLU(inplace=True), nn.MaxPool2d(2),
+            nn.Conv2d(conv1, conv2, 3), nn.ReLU(inplace=True), nn.AvgPool2d(7, stride=7),
+            nn.Flatten())
+        self.head = nn.Sequential(nn.Linear(conv2, hidden), nn.ReLU(inplace=True), nn.Linear(hidden, n_classes))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.head(self.features(x))
+
+    def layer_shapes(self, batch: int = 1) -> list[tuple[str, tuple[int, ...]]]:
+        """(layer name, output shape) of every layer for a (batch, 1, 20, 20) input."""
+        x = torch.zeros(batch, 1, SIDE, SIDE)
+        out = []
+        with torch.no_grad():
+            for layer in list(self.features) + list(self.head):
+                x = layer(x)
+                out.append((type(layer).__name__, tuple(x.shape)))
+        return out
+
+
+@contextlib.contextmanager
+def torch_threads(n: int):
+    """Run with ``n`` torch threads, restoring the previous count afterwards."""
+    old = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(old)
+
+
+def split_indices(yi: np.ndarray, fractions=(0.8, 0.1, 0.1), groups=None, rng=None):
+    """Stratified train / validation / test indices; whole groups go to one split.
+
+    Each class's items (or its groups) are shuffled and cut at the fractions; a
+    class with at least 3 items (groups) puts at least one in each split of
+    non-zero fraction. Returns three sorted index arrays (train, validation, test).
+    """
+    rng = np.random.default_rng(rng)
+    yi = np.asarray(yi)
+    groups = np.arange(yi.size) if groups is None else np.asarray(groups)
+    if groups.shape != yi.shape:
+        raise ValueError(f"groups must have one entry per profile ({yi.size}), got {groups.shape}")
+    parts = ([], [], [])
+    for c in np.unique(yi):
+        in_class = yi == c
+        g = rng.permutation(np.unique(groups[in_class]))
+        n = g.size
+        n_val, n_test = int(round(fractions[1] * n)), int(round(fractions[2] * n))
+        if n >= 3:
+            n_val = max(n_val, 1) if fractions[1] > 0 else 0
+            n_test = max(n_test, 1) if fractions[2] > 0 else 0
+        for part, sel in zip(parts, np.split(g, [n - n_val - n_test, n - n_test])):
+            part.append(np.flatnonzero(in_class & np.isin(groups, sel)))
+    return tuple(np.sort(np.concatenate(p)) for p in parts)
+
+
+class CNNClassifier(ProfileClassifier):
+    name = "cnn"
+
+    def __init__(self, epochs: int = 50, batch_size: int = 256, learning_rate: float = 1e-3,
+                 hidden: int = 64, patience: int | None = None, monitor: str = "loss",
+                 fractions=(0.8, 0.1, 0.1), progress: bool | None = None, **kw):
+        super().__init__(**kw)
+        if int(epochs) < 1 or int(batch_size) < 1:
+            raise ValueError(f"epochs and batch_size must be >= 1, got {epochs}, {batch_size}")
+        if monitor not in ("loss", "accuracy"):
+            raise ValueError(f"monitor must be 'loss' or 'accuracy', got {monitor!r}")
+        if len(fractions) != 3 or not math.isclose(sum(fractions), 1.0) or min(fractions) < 0 or fractions[1] <= 0:
+            raise ValueError(f"fractions must be (train, validation, test) summing to 1, got {fractions}")
+        self.epochs, self.batch_size, self.learning_rate = int(epochs), int(batch_size), float(learning_rate)
+        self.hidden, self.patience, self.monitor = int(hidden), patience, monitor
+        self.fractions = tuple(float(f) for f in fractions)
+        self.progress = progress
+        self.net_: ProfileCNN | None = None
+        self.history_: list[dict] = []
+        self.split_scores_: dict = {}
+        self.best_epoch_: int | None = None
+
+    def params(self) -> dict:
+        return {**super().params(), "epochs": self.epochs, "batch_size": self.batch_size,
+                "learning_rate": self.learning_rate, "hidden": self.hidden, "patience": self.patience,
+                "monitor": self.monitor, "fractions": list(self.fractions)}
+
+    def build(self, n_classes: int) -> ProfileCNN:
+        g = torch.Generator().manual_seed(derive_seed(self.random_state, 3))
+        net = ProfileCNN(n_classes, hidden=self.hidden)
+        with torch.no_grad():  # seeded re-initialisation with torch's default schemes
+            for m in net.modules():
+                if isinstance(m, (nn.Conv2d, nn.Linear)):
+                    bound = 1.0 / math.sqrt(m.weight[0].numel())
+                    m.weight.uniform_(-bound, bound, generator=g)
+                    m.bias.uniform_(-bound, bound, generator=g)
+        return net.to(memory_format=torch.channels_last)
+
+    @staticmethod
+    def to_tensor(X: np.ndarray) -> torch.Tensor:
+        if X.shape[1] != SIDE * SIDE:
+            raise ValueError(f"the CNN takes {SIDE * SIDE}-bin profiles (1 x {SIDE} x {SIDE}), got {X.shape[1]} bins")
+        t = torch.from_numpy(np.ascontiguousarray(X, dtype=np.float32)).reshape(-1, 1, SIDE, SIDE)
+        return t.contiguous(memory_format=torch.channels_last)
+
+    def _evaluate(self, x: torch.Tensor, y: torch.Tensor) -> tuple[float, float]:
+        if len(y) == 0:
+            return float("nan"), float("nan")
+        logits = self._logits(x)
+        loss = nn.functional.cross_entropy(logits, y).item()
+        return loss, (logits.argmax(1) == y).float().mean().item()
+
+    def _logits(self, x: torch.Tensor, chunk: int = 4096) -> torch.Tensor:
+        self.net_.eval()
+        with torch.no_grad():
+            return torch.cat([self.net_(x[i:i + chunk]) for i in range(0, len(x), chunk)])
+
+    def _fit(self, X, yi, groups=None):
+        x_all = self.to_tensor(X)
+        y_all = torch.from_numpy(yi)
+        tr, va, te = split_indices(yi, self.fractions, groups, derive_seed(self.random_state, 4))
+        if tr.size == 0 or va.size == 0:
+            raise ValueError(f"too few profiles ({yi.size}) for a {self.fractions} split")
+        shuffle = torch.Generator().manual_seed(derive_seed(self.random_state, 5))
+        with torch_threads(self.threads):
+            self.net_ = self.build(len(self.classes_))
+            opt = torch.optim.Adam(self.net_.parameters(), lr=self.learning_rate)
+            xtr, ytr = x_all[tr], y_all[tr]
+            xva, yva = x_all[va], y_all[va]
+            best, best_state, stale = None, None, 0
+            self.history_ = []
+            show = self.progress if self.progress is not None else None
+            bar = tqdm(range(1, self.epochs + 1), desc="CNN epochs", unit="epoch",
+                       disable=(not show) if show is not None else None, leave=False)
+            for epoch in bar:
+                t0 = time.perf_counter()
+                self.net_.train()
+                order = torch.randperm(len(ytr), generator=shuffle)
+                total = 0.0
+                for lo in range(0, len(order), self.batch_size):
+                    idx = order[lo:lo + self.batch_size]
+                    opt.zero_grad(set_to_none=True)
+                    loss = nn.functional.cross_entropy(self.net_(xtr[idx]), ytr[idx])
+                    loss.backward()
+                    opt.step()
+                    total += loss.item() * len(idx)
+                val_loss, val_acc = self._evaluate(xva, yva)
+                self.history_.append({"epoch": epoch, "train_loss": total / len(ytr),
+                                      "val_loss": val_loss, "val_accuracy": val_acc,
+                                      "seconds": time.perf_counter() - t0})
+                bar.set_postfix(loss=f"{total / len(ytr):.3f}", val_acc=f"{val_acc:.3f}")
+                key = val_loss if self.monitor == "loss" else -val_acc
+                if best is None or key < best:
+                    best, best_state, stale, self.best_epoch_ = key, copy.deepcopy(self.net_.state_dict()), 0, epoch
+                else:
+                    stale += 1
+                    if self.patience is not None and stale >= self.patience:
+                        break
+            bar.close()
+            self.net_.load_state_dict(best_state)
+            test_loss, test_acc = self._evaluate(x_all[te], y_all[te])
+            self.split_scores_ = {"n_train": int(tr.size), "n_val": int(va.size), "n_test": int(te.size),
+                                  "best_epoch": self.best_epoch_, "epochs_run": len(self.history_),
+                                  "val_loss": self.history_[self.best_epoch_ - 1]["val_loss"],
+                                  "val_accuracy": self.history_[self.best_epoch_ - 1]["val_accuracy"],
+                                  "test_loss": test_loss, "test_accuracy": test_acc}
+
+    def _proba(self, X):
+        with torch_threads(self.threads):
+            return torch.softmax(self._logits(self.to_tensor(X)), dim=1).double().numpy()

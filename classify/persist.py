@@ -1,0 +1,158 @@
+"""Model files that load without executing code from the file.
+
+A model file is one ZIP archive holding
+
+* ``meta.json``: ``format`` ("mdaug-classifier"), ``format_version``, ``kind``
+  (svm / nb / xgb / cnn), ``params`` (constructor arguments, including the
+  ``normalisation``), ``classes`` (labels in score order), ``n_features`` (input
+  profile length), ``weights`` (the member below), training figures
+  (``train_seconds``, CNN ``history`` and ``split_scores``) and the package version;
+* the weights, in each library's data-only format: ``model.skops`` (scikit-learn via
+  skops, loaded with an explicit list of trusted types), ``model.ubj`` (XGBoost's own
+  UBJSON), ``model.pt`` (a torch state dict loaded with ``weights_only=True``).
+
+Any other kind of file, a corrupted archive or a member that does not parse gives a
+:class:`mdaug.radar.DataFileError` naming the file.
+"""
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from ..radar import DataFileError, atomic_write
+from .base import ProfileClassifier
+from .models import classifier_class
+
+FORMAT = "mdaug-classifier"
+FORMAT_VERSION = 1
+SKOPS_TRUSTED = ("sklearn.calibration._CalibratedClassifier", "sklearn.calibration._SigmoidCalibration")
+
+
+def _package_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("mdaug")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def _weights(model: ProfileClassifier) -> tuple[str, bytes]:
+    if model.name in ("svm", "nb"):
+        import skops.io as sio
+
+        return "model.skops", sio.dumps(model.estimator_)
+    if model.name == "xgb":
+        return "model.ubj", bytes(model.estimator_.get_booster().save_raw("ubj"))
+    if model.name == "cnn":
+        import torch
+
+        buf = io.BytesIO()
+        torch.save({k: v.contiguous() for k, v in model.net_.state_dict().items()}, buf)
+        return "model.pt", buf.getvalue()
+    raise ValueError(f"cannot save a model of kind {model.name!r}")
+
+
+def save_model(model: ProfileClassifier, path) -> Path:
+    """Write a trained classifier to ``path`` (one ZIP, written atomically)."""
+    if not isinstance(model, ProfileClassifier):
+        raise ValueError(f"save_model expects an mdaug classifier, got {type(model).__name__}")
+    model._check_fitted()
+    member, blob = _weights(model)
+    meta = {"format": FORMAT, "format_version": FORMAT_VERSION, "kind": model.name,
+            "params": model.params(), "classes": model.classes_.tolist(),
+            "n_features": model.n_features_in_, "normalisation": model.normalisation,
+            "weights": member, "train_seconds": model.train_seconds_,
+            "package_version": _package_version()}
+    if model.name == "cnn":
+        meta.update(history=model.history_, split_scores=model.split_scores_, best_epoch=model.best_epoch_)
+
+    def write(fh):
+        with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+            zf.writestr("meta.json", json.dumps(meta, indent=1))
+            zf.writestr(member, blob)
+
+    return atomic_write(path, write)
+
+
+def _read_archive(path: Path) -> tuple[dict, bytes]:
+    if not path.is_file():
+        raise DataFileError(f"{path}: model file not found")
+    if not zipfile.is_zipfile(path):
+        raise DataFileError(f"{path}: not an mdaug model file (expected a ZIP archive written by "
+                            f"'mdaug train' / save_model)")
+    try:
+        with zipfile.ZipFile(path) as zf:
+            names = zf.namelist()
+            if "meta.json" not in names:
+                raise DataFileError(f"{path}: not an mdaug model file (no meta.json; members: {names[:5]})")
+            meta = json.loads(zf.read("meta.json"))
+            if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+                raise DataFileError(f"{path}: meta.json field 'format' is not {FORMAT!r}")
+            if meta.get("format_version") != FORMAT_VERSION:
+                raise DataFileError(f"{path}: meta.json field 'format_version' is "
+                                    f"{meta.get('format_version')!r}, this mdaug reads {FORMAT_VERSION}")
+            for key in ("kind", "params", "classes", "n_features", "weights"):
+                if key not in meta:
+                    raise DataFileError(f"{path}: meta.json lacks field {key!r}")
+            if meta["weights"] not in names:
+                raise DataFileError(f"{path}: weights member {meta['weights']!r} is missing")
+            blob = zf.read(meta["weights"])
+    except DataFileError:
+        raise
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise DataFileError(f"{path}: meta.json is not valid JSON ({exc})") from None
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, OSError, EOFError, ValueError) as exc:
+        raise DataFileError(f"{path}: corrupted model file ({exc})") from None
+    return meta, blob
+
+
+def _restore(model: ProfileClassifier, meta: dict, blob: bytes) -> None:
+    if model.name in ("svm", "nb"):
+        import skops.io as sio
+
+        untrusted = sio.get_untrusted_types(data=blob)
+        refused = sorted(set(untrusted) - set(SKOPS_TRUSTED))
+        if refused:
+            raise DataFileError(f"types {refused} are not on the trusted list")
+        model.estimator_ = sio.loads(blob, trusted=list(untrusted))
+    elif model.name == "xgb":
+        est = model._new_estimator()
+        est.load_model(bytearray(blob))
+        model.estimator_ = est
+    elif model.name == "cnn":
+        import torch
+
+        state = torch.load(io.BytesIO(blob), weights_only=True, map_location="cpu")
+        net = model.build(len(model.classes_))
+        net.load_state_dict(state)
+        model.net_ = net.to(memory_format=torch.channels_last)
+        model.history_ = meta.get("history", [])
+        model.split_scores_ = meta.get("split_scores", {})
+        model.best_epoch_ = meta.get("best_epoch")
+
+
+def load_model(path) -> ProfileClassifier:
+    """Read a classifier written by :func:`save_model` (no code from the file runs)."""
+    path = Path(path)
+    meta, blob = _read_archive(path)
+    try:
+        params = dict(meta["params"])
+        if "fractions" in params:
+            params["fractions"] = tuple(params["fractions"])
+        model = classifier_class(meta["kind"])(**params)
+        model.classes_ = np.array([str(c) for c in meta["classes"]])
+        model.n_features_in_ = int(meta["n_features"])
+        model.train_seconds_ = meta.get("train_seconds")
+        _restore(model, meta, blob)
+    except DataFileError as exc:
+        raise DataFileError(f"{path}: {exc}") from None
+    except Exception as exc:  # each library raises its own types for bad bytes
+        raise DataFileError(f"{path}: cannot restore the {meta.get('kind')!r} model "
+                            f"({type(exc).__name__}: {exc})") from None
+    return model
