@@ -36,14 +36,20 @@ def apply_threads(n: int) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
+    from .classify import commands as classify_commands
     from .generator import commands as generator_commands
+    from .inference import commands as inference_commands
+    from .generator import scene_commands
+    from .radar import commands as radar_commands
+    from .reports import commands as reports_commands
 
     parser = argparse.ArgumentParser(prog="mdaug", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"mdaug {__version__}")
     parser.add_argument("--threads", type=int, default=default_threads(),
                         help="threads for BLAS / FFT / torch (default $MDAUG_THREADS or 1)")
     sub = parser.add_subparsers(dest="verb", metavar="VERB")
-    for module in (generator_commands,):
+    for module in (generator_commands, inference_commands, radar_commands, scene_commands, reports_commands,
+                   classify_commands):
         module.register(sub)
     return parser
 

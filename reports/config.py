@@ -58,15 +58,21 @@ class SimulationConfig:
 class ProtocolConfig:
     sigma_p: tuple[float, ...] = PUBLISHED_SIGMA_PS
     models: tuple[str, ...] = ("svm", "nb", "xgb")
-    sweep_n_per_class: int = 2000
+    sweep_n_per_class: int = 4000     # 8,000 training profiles: +-2 points of 32,000, 4x faster
     cnn_n_per_class: int = 16000
     cnn_epochs: int = 50
-    tsaug_n_per_class: int = 2000
+    tsaug_n_per_class: int = 4000
     tsaug_epochs: int = 100
     nuisances: tuple[str, ...] = tuple(NUISANCE_PRESETS)
     cnn_strategies: tuple[str, ...] = ("sigma_p", "sigma_p_uniform", "posterior", "tsaug")
     normalisation: str = "peak"
     n_boot: int = 1000
+    # calibration budget: one noisy profile gives a multimodal posterior that does not
+    # reach 50 tau even in 30,000 steps; 8,000 steps keep posterior means within ~0.1 sd
+    # of a 24,000-step chain (tests/benchmarks/inference.py) at a quarter of the time
+    calibration_max_steps: int = 8000
+    calibration_starts: int = 4
+    calibration_fit_budget: int = 6000
 
 
 @dataclass
@@ -93,7 +99,8 @@ class StudyConfig:
         p = dataclasses.replace(
             self.protocol, sigma_p=(0.0, 0.1, 0.2, 0.4), models=("nb", "xgb"), sweep_n_per_class=300,
             cnn_n_per_class=1500, cnn_epochs=6, tsaug_n_per_class=300, tsaug_epochs=8, n_boot=300,
-            nuisances=("published", "uniform-phases"))
+            nuisances=("published", "uniform-phases"), calibration_max_steps=500, calibration_starts=1,
+            calibration_fit_budget=600)
         s = dataclasses.replace(self.simulation, n_calibration=2, n_new={c: 24 for c in self.classes},
                                 new_specimens=2, large_factor=1, ceiling_per_class=80)
         return dataclasses.replace(self, quick=True, protocol=p, simulation=s)
@@ -121,7 +128,8 @@ class StudyConfig:
         bad = [s for s in self.protocol.sigma_p if not 0 <= s <= 1]
         if bad or not self.protocol.sigma_p:
             raise ValueError(f"{src}: protocol.sigma_p must be a non-empty list in [0, 1], got {self.protocol.sigma_p}")
-        for name in ("sweep_n_per_class", "cnn_n_per_class", "cnn_epochs", "tsaug_n_per_class", "tsaug_epochs"):
+        for name in ("sweep_n_per_class", "cnn_n_per_class", "cnn_epochs", "tsaug_n_per_class", "tsaug_epochs",
+                     "calibration_max_steps", "calibration_starts", "calibration_fit_budget"):
             if getattr(self.protocol, name) < 1:
                 raise ValueError(f"{src}: protocol.{name} must be >= 1")
         return self

@@ -28,15 +28,19 @@ def sigma_p_training_set(sigma_p: float, seed: int, *, classes, n_per_class: int
 
 
 def training_set(job: dict):
-    """(X, y) for one CNN strategy: sigma_p, sigma_p_uniform, posterior or tsaug."""
+    """(X, y, groups) for one CNN strategy: sigma_p, sigma_p_uniform, posterior or tsaug.
+
+    groups (tsaug only) is each copy's source profile, so that the CNN's validation
+    split never holds a copy of a profile it trains on; None for model-based sets."""
     from ..generator import Nuisance, SigmaPAugmenter, make_dataset
 
     kind, n, seed = job["strategy_kind"], job["n_per_class"], job["seed"]
     if kind == "tsaug":
         from ..classify import TsaugAugmenter
 
-        aug = TsaugAugmenter(np.asarray(job["profiles"]), np.asarray(job["labels"]), random_state=seed)
-        return aug.sample(n)
+        aug = TsaugAugmenter(np.asarray(job["profiles"]), np.asarray(job["labels"]), random_state=seed,
+                             normalisation=job["normalisation"])
+        return aug.sample(n, return_sources=True)
     nuisance = Nuisance(**job["nuisance"])
     if kind == "sigma_p":
         augs = [SigmaPAugmenter(c, job["sigma_p"], nuisance=nuisance, normalisation=job["normalisation"])
@@ -49,7 +53,7 @@ def training_set(job: dict):
     else:
         raise ValueError(f"unknown training strategy {kind!r}")
     ds = make_dataset(augs, n, seed, progress=False)
-    return ds.profiles, ds.labels
+    return ds.profiles, ds.labels, None
 
 
 def train_and_test(job: dict) -> dict:
@@ -58,12 +62,12 @@ def train_and_test(job: dict) -> dict:
 
     _threads(job.get("threads", 1))
     t0 = time.perf_counter()
-    X, y = training_set(job)
+    X, y, groups = training_set(job)
     t_data = time.perf_counter() - t0
     params = dict(job.get("model_params", {}))
     clf = make_classifier(job["model"], random_state=job["seed"], **params)
     t1 = time.perf_counter()
-    clf.fit(X, y)
+    clf.fit(X, y, **({} if groups is None else {"groups": groups}))
     t_train = time.perf_counter() - t1
     if job.get("model_path"):
         save_model(clf, job["model_path"])

@@ -133,11 +133,17 @@ class Study:
 
         def compute():
             X, _ = self.load_set(f"calibration_{cls}")
-            settings = CalibrationSettings.quick() if self.cfg.quick else CalibrationSettings()
+            p = self.cfg.protocol
+            base = CalibrationSettings.quick(polish_budget=600) if self.cfg.quick else CalibrationSettings()
+            settings = base.replace(max_steps=p.calibration_max_steps, n_starts=p.calibration_starts,
+                                    fit_budget=p.calibration_fit_budget,
+                                    check_every=min(base.check_every, p.calibration_max_steps))
+            checkpoint = self.out / "posteriors" / f"{cls}.chain.h5"
             res = calibrate(X, cls, settings=settings, random_state=_seed(self.cfg, "calibrate", cls),
-                            backend_path=self.out / "posteriors" / f"{cls}.chain.h5")
+                            backend_path=checkpoint)
             nc = self.out / "posteriors" / f"{cls}.nc"
             res.save(nc)
+            checkpoint.unlink(missing_ok=True)  # only needed to resume an interrupted chain
             corner_png = self.out / "figures" / f"corner_{cls}.png"
             trace_png = self.out / "figures" / f"trace_{cls}.png"
             res.plot_corner(corner_png)
@@ -158,8 +164,10 @@ class Study:
                                  n_per_class=p.sweep_n_per_class,
                                  nuisance=dataclasses.asdict(NUISANCE_PRESETS[nuisance]),
                                  normalisation=p.normalisation)
-            res = sigma_p_sweep(make_train, tests, sigma_ps=p.sigma_p, models=p.models,
-                                random_state=_seed(self.cfg, "sweep", nuisance), executor=executor)
+            make_train.cache_key = settings_key(self.key, nuisance)  # lets the sweep resume per sigma_P
+            res = sigma_p_sweep(make_train, tests, sigma_ps=p.sigma_p, models=p.models, n_boot=p.n_boot,
+                                random_state=_seed(self.cfg, "sweep", nuisance), executor=executor,
+                                cache_dir=self.out / "stages" / f"sweep_{nuisance}", progress=False)
             png = self.out / "figures" / f"sweep_{nuisance}.png"
             res.plot(png)
             res.to_csv(self.out / f"sweep_{nuisance}.csv")
@@ -337,4 +345,6 @@ def _jsonable(obj):
         return obj.item()
     if isinstance(obj, Path):
         return str(obj)
+    if hasattr(obj, "to_dict") and hasattr(obj, "index"):  # a pandas table: {row: {column: value}}
+        return _jsonable(obj.to_dict(orient="index"))
     return obj

@@ -1,0 +1,132 @@
+"""The likelihood of measured profiles given the model, vectorised over walkers.
+
+Noise model (stated once): after the same normalisation as f(x) (``peak`` by
+default), every bin of measurement m is the model profile plus independent
+Gaussian noise of a per-measurement level sigma_m, which is inferred (log-uniform
+prior). For a measured linear-magnitude profile with a noise floor this is an
+approximation (magnitudes are Rician; the noisy peak used for normalisation
+carries noise too); it keeps the per-bin log-likelihood available for LOO/WAIC.
+The fit uses the same model with sigma_m profiled out: misfit =
+sum_m (L/2) ln(SSR_m / L), a monotone map of the sum of squared residuals.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..generator import profiles as model_profiles
+from ..generator import spectra as model_spectra
+from ..radar import RadarConfig, centred_slices, normalise
+from .priors import Layout
+
+LOG_2PI = float(np.log(2 * np.pi))
+ALIGNMENTS = ("tone", "peak")
+
+
+def prepare_measured(profiles, radar: RadarConfig, normalisation: str, what: str = "measured profiles"):
+    """Check and normalise measured linear-magnitude profiles.
+
+    profiles: (n, L) or (L,) with L = radar.slice_length. A profile whose maximum is
+    not at index L // 2 is re-centred (zero-filled, as f(x) does). Returns
+    (normalised (n, L) float64, shifts (n,) in bins). Raises ValueError for a wrong
+    length, non-finite values or an all-zero profile.
+    """
+    y = np.asarray(profiles, dtype=np.float64)
+    if y.ndim == 1:
+        y = y[None, :]
+    if y.ndim != 2 or y.shape[0] == 0:
+        raise ValueError(f"{what}: expected shape (n, {radar.slice_length}) or ({radar.slice_length},), got {y.shape}")
+    if y.shape[1] != radar.slice_length:
+        raise ValueError(f"{what}: profiles have {y.shape[1]} bins; expected {radar.slice_length} "
+                         "(peak-centred slices, SPEC section 2)")
+    if not np.all(np.isfinite(y)):
+        row = int(np.argwhere(~np.isfinite(y))[0, 0])
+        raise ValueError(f"{what}: profile {row} holds NaN or inf; expected finite linear magnitudes")
+    zero = ~np.any(y != 0, axis=1)
+    if zero.any():
+        raise ValueError(f"{what}: profile(s) {np.flatnonzero(zero).tolist()} are all zeros; "
+                         "nothing to calibrate against")
+    if np.any(y < 0):
+        raise ValueError(f"{what}: negative values; expected linear magnitudes (>= 0), not dB")
+    half = radar.slice_length // 2
+    peak = np.argmax(y, axis=1)
+    shifts = peak - half
+    if np.any(shifts):
+        y, _ = centred_slices(y, peak, radar.slice_length)
+    return normalise(y, normalisation), shifts
+
+
+class LogPosterior:
+    """log p(theta | data) for a batch of theta (W, dim); callable by emcee with vectorize=True.
+
+    data: (M, L) normalised measured profiles; layout: the :class:`Layout`.
+    """
+
+    def __init__(self, data: np.ndarray, layout: Layout, radar: RadarConfig = RadarConfig(), *,
+                 normalisation: str = "peak", dtype: str = "float32", sigma_bounds=(1e-4, 1.0),
+                 alignment: str = "tone"):
+        self.data = np.asarray(data, dtype=np.float64)
+        self.layout, self.radar, self.normalisation = layout, radar, normalisation
+        self.dtype, self.sigma_bounds = dtype, tuple(sigma_bounds)
+        self.n_bins = self.data.shape[1]
+        self.n_calls = 0  # profiles computed (for benchmarks)
+        if alignment not in ALIGNMENTS:
+            raise ValueError(f"alignment must be one of {ALIGNMENTS}, got {alignment!r}")
+        self.alignment = alignment
+        centre = int(round(radar.model_range_to_bin(radar.model_range_m)))
+        lo = centre - radar.slice_length // 2
+        if lo < 0 or lo + radar.slice_length > radar.n_bins:
+            raise ValueError(f"model range {radar.model_range_m} m puts the profile window outside the spectrum")
+        self._window = slice(lo, lo + radar.slice_length)
+
+    def model(self, z: np.ndarray) -> np.ndarray:
+        """Model profiles (W, M, L) of fit-space points z (W, dim_z).
+
+        ``alignment="tone"`` (default): the window is centred on the bin of the
+        carrier tone at the model range, and the per-measurement offset moves the tone
+        within it (R0 = model range + offset x model range per bin). Unlike f(x)'s
+        argmax centring, this is continuous in the parameters: the flat-topped main
+        lobe's argmax flips between neighbouring bins under tiny parameter changes,
+        and with it the whole window, which makes the likelihood a field of cliffs.
+        The offset's prior must cover where the data's window (centred on its own
+        maximum) sits relative to the tone. ``alignment="peak"``: f(x) exactly.
+        """
+        x, off = self.layout.physics(z)
+        w, m, _ = x.shape
+        r0 = self.radar.model_range_m + off.reshape(-1) * self.radar.model_range_per_bin()
+        if self.alignment == "peak":
+            prof = model_profiles(x.reshape(w * m, -1), self.radar, r0=r0, normalisation=self.normalisation,
+                                  dtype=self.dtype, on_edge="pad")
+        else:
+            mag = model_spectra(x.reshape(w * m, -1), self.radar, r0=r0, dtype=self.dtype)
+            prof = normalise(mag[:, self._window], self.normalisation)
+        self.n_calls += w * m
+        return prof.reshape(w, m, -1).astype(np.float64)
+
+    def ssr(self, z: np.ndarray) -> np.ndarray:
+        """Sum of squared residuals per measurement (W, M)."""
+        r = self.model(z) - self.data[None]
+        return np.einsum("wml,wml->wm", r, r)
+
+    def misfit(self, z: np.ndarray) -> np.ndarray:
+        """Negative profile log-likelihood (sigma_m at its maximum), up to a constant: (W,)."""
+        ssr = np.maximum(self.ssr(z), 1e-300)
+        return 0.5 * self.n_bins * np.sum(np.log(ssr / self.n_bins), axis=1)
+
+    def pointwise(self, theta: np.ndarray) -> np.ndarray:
+        """Per-bin log-likelihood (W, M, L) of theta (W, dim)."""
+        z, ln_sigma = self.layout.split_theta(theta)
+        r = self.model(z) - self.data[None]
+        s = np.exp(ln_sigma)[:, :, None]
+        return -0.5 * (r / s) ** 2 - np.log(s) - 0.5 * LOG_2PI
+
+    def __call__(self, theta: np.ndarray) -> np.ndarray:
+        theta = np.atleast_2d(theta)
+        lp = self.layout.log_prior(theta, self.sigma_bounds)
+        ok = np.isfinite(lp)
+        out = np.full(theta.shape[0], -np.inf)
+        if ok.any():
+            z, ln_sigma = self.layout.split_theta(theta[ok])
+            ssr = self.ssr(z)
+            ll = -0.5 * ssr * np.exp(-2 * ln_sigma) - self.n_bins * ln_sigma - 0.5 * self.n_bins * LOG_2PI
+            out[ok] = lp[ok] + ll.sum(axis=1)
+        return out

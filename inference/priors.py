@@ -1,0 +1,291 @@
+"""Priors and the parametrisation the fit and the sampler work in.
+
+What is sampled (per class with E engines and M measurements):
+
+* shared by all measurements (the drone's physics), per engine k:
+  ``A_a, A_b, A_p, A_m`` (m), ``w_a, w_b`` (rad/s), ``C_p, C_m`` and, for k >= 1,
+  ``lnG`` = ln(Gamma_k / Gamma_0);
+* per measurement m: the 4 vibration phases of every engine, the sub-bin range
+  offset (FFT bins, optional) and the noise level ln(sigma_m).
+
+Hazards, handled here:
+
+* Scale: a peak-normalised profile is invariant to multiplying every Gamma by a
+  constant, so Gamma_0 is *fixed* (to the largest reference Gamma) and only the
+  ratios Gamma_k / Gamma_0 are fitted. Gamma_0 is reported as fixed, not inferred.
+* Roll/pitch mirror: swapping an engine's (A_a, w_a, phi_a) with (A_b, w_b, phi_b)
+  leaves f(x) unchanged (the mixing terms use |w_a + w_b| and |w_a - w_b|), so the
+  prior requires w_a < w_b; A_a and A_b share bounds so the swap maps the prior
+  onto itself. Engine permutation: the prior requires w_a[0] < w_a[1] < ...
+* Phases live on the circle: uniform prior, no boundary. The fit works on angles
+  in a [-pi, pi] box (nlopt needs a box); the sampler's moves are translations
+  taken modulo 2 pi (:mod:`.sampler`), so walkers cross +-pi freely; summaries of
+  phases are circular.
+
+All priors are uniform on their box (log-uniform for Gamma ratios and sigma);
+defaults derive from the class reference (:meth:`Priors.from_reference`) and
+any bound can be overridden.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..generator import IDX, N_PARAMS, ClassParams
+from ..radar import RadarConfig
+
+SHARED = ("A_a", "A_b", "A_p", "A_m", "w_a", "w_b", "C_p", "C_m")
+PHASE_NAMES = ("phi_a", "phi_b", "phi_p", "phi_m")
+TWO_PI = 2.0 * np.pi
+OFFSET_BINS = {"tone": (-4.0, 4.0), "peak": (-0.5, 0.5)}
+"""Default prior of the per-measurement offset (FFT bins) for each alignment: with
+``tone`` it is where the data window's maximum sits relative to the carrier tone,
+with ``peak`` the sub-bin position only."""
+
+
+@dataclass(frozen=True)
+class Priors:
+    """Uniform box priors of the shared parameters (the same for every engine).
+
+    bounds: name -> (lo, hi) for every name in ``SHARED`` and ``lnG`` (natural log
+    of Gamma_k / Gamma_0); gamma0: the fixed Gamma of engine 0; centres: (E_ref, 13)
+    reference vectors (start points of the fit, not part of the prior).
+    """
+
+    bounds: dict
+    gamma0: float
+    centres: np.ndarray
+    offset_bins: tuple = (-0.5, 0.5)
+
+    def __post_init__(self) -> None:
+        missing = [n for n in SHARED + ("lnG",) if n not in self.bounds]
+        if missing:
+            raise ValueError(f"prior bounds missing for {missing}")
+        for name, (lo, hi) in self.bounds.items():
+            if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+                raise ValueError(f"prior bounds of {name}: need finite lo < hi, got ({lo}, {hi})")
+        for a, b in (("A_a", "A_b"), ("w_a", "w_b")):
+            if tuple(self.bounds[a]) != tuple(self.bounds[b]):
+                raise ValueError(f"prior bounds of {a} and {b} must be equal (the a<->b mirror "
+                                 f"maps one onto the other), got {self.bounds[a]} and {self.bounds[b]}")
+        if self.bounds["w_a"][0] <= 0 or self.bounds["A_a"][0] < 0:
+            raise ValueError("prior bounds: frequencies must be > 0 and amplitudes >= 0")
+        if not self.gamma0 > 0:
+            raise ValueError(f"gamma0 must be > 0, got {self.gamma0}")
+
+    @classmethod
+    def from_reference(cls, ref: ClassParams, radar: RadarConfig = RadarConfig(), *,
+                       amp_factor: float = 3.0, w_factors=(0.25, 3.0), c_bounds=(0.5, 1.5),
+                       gamma_ratio_range: float = 100.0, alignment: str = "tone", **override) -> "Priors":
+        """Default priors from a class reference.
+
+        Amplitudes on [0, amp_factor x largest reference value] (A_a and A_b share
+        theirs); w_a, w_b on [w_factors[0] x smallest, w_factors[1] x largest
+        reference roll/pitch frequency], capped so the fastest mixing line
+        (C_p_max x 2 w_hi) stays inside the profile window; C on ``c_bounds``;
+        Gamma ratios within a factor ``gamma_ratio_range`` either way; the
+        per-measurement tone offset on ``OFFSET_BINS[alignment]`` FFT bins.
+        ``override``: name=(lo, hi) replaces any of them (also ``offset_bins``).
+        """
+        e = ref.to_array().reshape(-1, N_PARAMS)
+        col = lambda *names: e[:, [IDX[n] for n in names]]  # noqa: E731
+        a_ab = amp_factor * float(col("A_a", "A_b").max())
+        w_ab = col("w_a", "w_b")
+        w_visible = TWO_PI * radar.bin_hz * (radar.slice_length // 2)  # rad/s at the window's edge
+        w_hi = min(w_factors[1] * float(w_ab.max()), 0.95 * w_visible / (2.0 * c_bounds[1]))
+        bounds = {
+            "A_a": (0.0, a_ab), "A_b": (0.0, a_ab),
+            "A_p": (0.0, amp_factor * float(col("A_p").max())),
+            "A_m": (0.0, amp_factor * float(col("A_m").max())),
+            "w_a": (w_factors[0] * float(w_ab.min()), w_hi), "w_b": (w_factors[0] * float(w_ab.min()), w_hi),
+            "C_p": tuple(c_bounds), "C_m": tuple(c_bounds),
+            "lnG": (-np.log(gamma_ratio_range), np.log(gamma_ratio_range)),
+        }
+        offset = override.pop("offset_bins", OFFSET_BINS[alignment])
+        unknown = sorted(set(override) - set(bounds))
+        if unknown:
+            raise ValueError(f"unknown prior override(s) {unknown}; known: {sorted(bounds)} and offset_bins")
+        bounds.update({k: tuple(map(float, v)) for k, v in override.items()})
+        gamma0 = float(e[:, IDX["Gamma"]].max())
+        return cls(bounds=bounds, gamma0=gamma0 if gamma0 > 0 else 1.0, centres=e.copy(),
+                   offset_bins=tuple(offset))
+
+    def replace(self, **kw) -> "Priors":
+        return dataclasses.replace(self, **kw)
+
+    def to_dict(self) -> dict:
+        return {"bounds": {k: list(v) for k, v in self.bounds.items()}, "gamma0": self.gamma0,
+                "centres": self.centres.tolist(), "offset_bins": list(self.offset_bins)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Priors":
+        return cls(bounds={k: tuple(v) for k, v in d["bounds"].items()}, gamma0=float(d["gamma0"]),
+                   centres=np.asarray(d["centres"], dtype=float), offset_bins=tuple(d["offset_bins"]))
+
+
+class Layout:
+    """Index bookkeeping between three vectors.
+
+    * ``z`` (fit space, a box): shared block, then per measurement [4E phases (rad),
+      offset (bins) if fitted];
+    * ``theta`` (sampler space): z followed by ln sigma of every measurement;
+    * physics: (M, 13E) vectors with Gamma_0 fixed, plus offsets (M,) in bins.
+    """
+
+    def __init__(self, n_engines: int, n_meas: int, priors: Priors, range_offset: bool = True):
+        self.E, self.M, self.priors, self.range_offset = int(n_engines), int(n_meas), priors, bool(range_offset)
+        self.shared_names = [f"{n}[{k}]" for k in range(self.E) for n in SHARED + (("lnG",) if k else ())]
+        self.n_shared = len(self.shared_names)
+        self.n_meas_z = 4 * self.E + int(self.range_offset)
+        self.dim_z = self.n_shared + self.M * self.n_meas_z
+        self.dim = self.dim_z + self.M
+        # column of every shared physical parameter (engine k, name) in z / theta
+        self._shared_col = {}
+        j = 0
+        for k in range(self.E):
+            for n in SHARED + (("lnG",) if k else ()):
+                self._shared_col[(k, n)] = j
+                j += 1
+
+    # ---- names and bounds ---------------------------------------------------
+    def z_names(self) -> list[str]:
+        names = list(self.shared_names)
+        for m in range(self.M):
+            names += [f"{p}[{k}]@{m}" for k in range(self.E) for p in PHASE_NAMES]
+            if self.range_offset:
+                names.append(f"offset@{m}")
+        return names
+
+    def z_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        b = self.priors.bounds
+        lo = [b[n.split("[")[0]][0] for n in self.shared_names]
+        hi = [b[n.split("[")[0]][1] for n in self.shared_names]
+        per_lo = [-np.pi] * (4 * self.E) + ([self.priors.offset_bins[0]] if self.range_offset else [])
+        per_hi = [np.pi] * (4 * self.E) + ([self.priors.offset_bins[1]] if self.range_offset else [])
+        return np.array(lo + per_lo * self.M, float), np.array(hi + per_hi * self.M, float)
+
+    def shared_col(self, k: int, name: str) -> int:
+        return self._shared_col[(k, name)]
+
+    # ---- z <-> theta ----------------------------------------------------------
+    def _z_meas(self, m: int) -> slice:
+        s = self.n_shared + m * self.n_meas_z
+        return slice(s, s + self.n_meas_z)
+
+    @property
+    def phase_cols(self) -> np.ndarray:
+        """Columns of z (and theta) holding phases (rad, wrapped to [-pi, pi))."""
+        return np.array([self.n_shared + m * self.n_meas_z + j for m in range(self.M) for j in range(4 * self.E)],
+                        dtype=int)
+
+    def theta_from_z(self, z: np.ndarray, ln_sigma: np.ndarray) -> np.ndarray:
+        """z (W, dim_z) and ln sigma (W, M) -> theta (W, dim) = [z, ln sigma]."""
+        z = np.atleast_2d(z)
+        ln_sigma = np.broadcast_to(np.asarray(ln_sigma, float).reshape(z.shape[0], -1), (z.shape[0], self.M))
+        return np.concatenate([z, ln_sigma], axis=1)
+
+    def split_theta(self, theta: np.ndarray):
+        """theta (W, dim) -> (z (W, dim_z) with phases wrapped, ln_sigma (W, M))."""
+        theta = np.atleast_2d(theta)
+        z = theta[:, : self.dim_z].copy()
+        z[:, self.phase_cols] = wrap(z[:, self.phase_cols])
+        return z, theta[:, self.dim_z:]
+
+    # ---- physics ----------------------------------------------------------------
+    def physics(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """z (W, dim_z) -> parameter vectors (W, M, 13E) and range offsets (W, M) in bins."""
+        z = np.atleast_2d(z)
+        w = z.shape[0]
+        x = np.empty((w, self.M, self.E, N_PARAMS))
+        for k in range(self.E):
+            for n in SHARED:
+                x[:, :, k, IDX[n]] = z[:, [self.shared_col(k, n)]]
+            x[:, :, k, IDX["Gamma"]] = (self.priors.gamma0 if k == 0 else
+                                        self.priors.gamma0 * np.exp(z[:, [self.shared_col(k, "lnG")]]))
+        offsets = np.zeros((w, self.M))
+        for m in range(self.M):
+            zm = z[:, self._z_meas(m)]
+            for k in range(self.E):
+                for j, p in enumerate(PHASE_NAMES):
+                    x[:, m, k, IDX[p]] = zm[:, 4 * k + j]
+            if self.range_offset:
+                offsets[:, m] = zm[:, 4 * self.E]
+        return x.reshape(w, self.M, self.E * N_PARAMS), offsets
+
+    def z_from_physics(self, x: np.ndarray, offsets=None) -> np.ndarray:
+        """Inverse of :meth:`physics`: x (M, 13E) (or (13E,) for all measurements) -> z (dim_z,).
+        Gamma ratios are taken relative to engine 0's Gamma."""
+        x = np.asarray(x, float)
+        x = np.broadcast_to(x.reshape(-1, self.E, N_PARAMS), (self.M, self.E, N_PARAMS))
+        z = np.empty(self.dim_z)
+        g0 = x[0, 0, IDX["Gamma"]]
+        for k in range(self.E):
+            for n in SHARED:
+                z[self.shared_col(k, n)] = x[0, k, IDX[n]]
+            if k:
+                ratio = x[0, k, IDX["Gamma"]] / g0 if g0 > 0 else 1.0
+                z[self.shared_col(k, "lnG")] = np.log(max(ratio, 1e-300))
+        for m in range(self.M):
+            zm = np.empty(self.n_meas_z)
+            for k in range(self.E):
+                zm[4 * k: 4 * k + 4] = wrap(x[m, k, [IDX[p] for p in PHASE_NAMES]])
+            if self.range_offset:
+                zm[4 * self.E] = 0.0 if offsets is None else np.asarray(offsets, float).reshape(-1)[m]
+            z[self._z_meas(m)] = zm
+        return z
+
+    # ---- symmetries ----------------------------------------------------------------
+    def canonical(self, z: np.ndarray) -> np.ndarray:
+        """The mirror image of z that satisfies the ordering constraints (w_a < w_b in
+        every engine, w_a increasing over engines, Gamma ratios to the new engine 0);
+        f(x) is unchanged by construction."""
+        z = np.array(np.atleast_2d(z), dtype=float)
+        x, off = self.physics(z)
+        x = x.reshape(z.shape[0], self.M, self.E, N_PARAMS)
+        a = [IDX["A_a"], IDX["w_a"], IDX["phi_a"]]
+        b = [IDX["A_b"], IDX["w_b"], IDX["phi_b"]]
+        swap = x[..., IDX["w_a"]] > x[..., IDX["w_b"]]  # (W, M, E), equal over M
+        xa, xb = x[..., a].copy(), x[..., b].copy()
+        x[..., a] = np.where(swap[..., None], xb, xa)
+        x[..., b] = np.where(swap[..., None], xa, xb)
+        order = np.argsort(x[:, 0, :, IDX["w_a"]], axis=1, kind="stable")  # (W, E)
+        x = np.take_along_axis(x, order[:, None, :, None], axis=2)
+        out = np.empty_like(z)
+        for i in range(z.shape[0]):
+            out[i] = self.z_from_physics(x[i].reshape(self.M, -1), off[i])
+        return out
+
+    # ---- prior ----------------------------------------------------------------------
+    def log_prior(self, theta: np.ndarray, sigma_bounds: tuple[float, float]) -> np.ndarray:
+        """Log prior density of theta (W, dim): 0 inside the support, -inf outside (phases
+        are unbounded: the density is periodic in them)."""
+        theta = np.atleast_2d(theta)
+        z, ln_sigma = theta[:, : self.dim_z], theta[:, self.dim_z:]
+        lo, hi = self.z_bounds()
+        box = np.ones(self.dim_z, bool)
+        box[self.phase_cols] = False
+        ok = np.all((z[:, box] >= lo[box]) & (z[:, box] <= hi[box]), axis=1)
+        ok &= np.all((ln_sigma >= np.log(sigma_bounds[0])) & (ln_sigma <= np.log(sigma_bounds[1])), axis=1)
+        wa = z[:, [self.shared_col(k, "w_a") for k in range(self.E)]]
+        wb = z[:, [self.shared_col(k, "w_b") for k in range(self.E)]]
+        ok &= np.all(wa < wb, axis=1) & np.all(np.diff(wa, axis=1) > 0, axis=1)
+        return np.where(ok, 0.0, -np.inf)
+
+    def sample_prior(self, n: int, rng: np.random.Generator, sigma_bounds=(1e-4, 1.0)) -> np.ndarray:
+        """n draws of theta from the prior (the mirror image of a box draw satisfies the
+        ordering constraints and has the same density, so no rejection is needed)."""
+        lo, hi = self.z_bounds()
+        out = np.empty((0, self.dim))
+        while len(out) < n:  # with several engines the re-referenced Gamma ratios can leave their box
+            z = self.canonical(rng.uniform(lo, hi, size=(n, self.dim_z)))
+            ls = rng.uniform(np.log(sigma_bounds[0]), np.log(sigma_bounds[1]), size=(n, self.M))
+            th = self.theta_from_z(z, ls)
+            out = np.concatenate([out, th[np.isfinite(self.log_prior(th, sigma_bounds))]])
+        return out[:n]
+
+
+def wrap(phi):
+    """Phases to [-pi, pi)."""
+    return (np.asarray(phi) + np.pi) % TWO_PI - np.pi

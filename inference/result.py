@@ -1,0 +1,320 @@
+"""CalibrationResult: an arviz InferenceData with the toolkit's reading of it.
+
+NetCDF layout (``.save`` / ``.load``):
+
+* ``posterior`` (chain=1, draw): the thinned post-burn-in draws, all walkers
+  pooled (walkers are not independent chains, so there is one chain), as physical
+  parameters: ``Gamma, A_a, w_a, ...`` with dims (chain, draw, engine), the phases
+  ``phi_*`` with (chain, draw, measurement, engine), ``offset`` (range offset, FFT
+  bins) and ``sigma`` (noise level) with (chain, draw, measurement). Gamma of engine
+  0 is fixed (the scale of a normalised profile is not identifiable);
+* ``sample_stats``: ``lp`` (log posterior);
+* ``log_likelihood``: ``y`` per bin (chain, draw, measurement, bin) for LOO/WAIC;
+* ``observed_data``: ``y`` the normalised measured profiles;
+* ``chain_trace``: the walkers' full path (every k-th step) for trace plots;
+* ``posterior.attrs["mdaug"]``: JSON with the class, engine count, settings,
+  priors, fit, convergence diagnostics (tau, ESS, acceptance, converged, reason).
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..generator import IDX, N_PARAMS, PARAM_NAMES
+from .priors import PHASE_NAMES, SHARED, Priors, wrap
+
+FORMAT = "mdaug-posterior-1"
+IDENTIFIED_RATIO = 0.5  # posterior sd / prior sd above this: "stays near its prior"
+
+
+def import_arviz():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        import arviz as az
+    return az
+
+
+def circular_stats(phi: np.ndarray, q=(0.05, 0.95)) -> dict:
+    """Circular mean, sd = sqrt(-2 ln R), mean resultant length R and a central
+    interval (quantiles of the phases unwrapped around the mean) of draws (n,)."""
+    c, s = np.mean(np.cos(phi)), np.mean(np.sin(phi))
+    r = float(np.hypot(c, s))
+    mu = float(np.arctan2(s, c))
+    centred = wrap(phi - mu)
+    lo, hi = np.quantile(centred, q) + mu
+    return {"mean": mu, "sd": float(np.sqrt(-2 * np.log(max(r, 1e-12)))), "R": r, "q05": float(lo), "q95": float(hi)}
+
+
+class CalibrationResult:
+    """A calibrated class: posterior draws, fit, diagnostics (see the module docstring)."""
+
+    def __init__(self, idata):
+        self.idata = idata
+        try:
+            self.meta = json.loads(idata.posterior.attrs["mdaug"])
+        except (AttributeError, KeyError, ValueError) as exc:
+            raise ValueError("not an mdaug posterior (no 'mdaug' attributes in its posterior group)") from exc
+        if self.meta.get("format") != FORMAT:
+            raise ValueError(f"posterior format {self.meta.get('format')!r}; expected {FORMAT!r}")
+        self.priors = Priors.from_dict(self.meta["priors"])
+
+    # ---- identity ----------------------------------------------------------------
+    @property
+    def class_name(self) -> str:
+        return self.meta["class_name"]
+
+    @property
+    def n_engines(self) -> int:
+        return int(self.meta["n_engines"])
+
+    @property
+    def n_measurements(self) -> int:
+        return int(self.meta["n_measurements"])
+
+    @property
+    def converged(self) -> bool:
+        return bool(self.meta["diagnostics"]["converged"])
+
+    @property
+    def diagnostics(self) -> dict:
+        """Plain-float diagnostics: tau and ESS per sampled coordinate, acceptance,
+        chain length / max tau, fit agreement, identifiability per parameter."""
+        return self.meta["diagnostics"]
+
+    @property
+    def fit(self) -> dict:
+        return self.meta["fit"]
+
+    @property
+    def best_fit(self) -> np.ndarray:
+        """Best-fit flat vector (13E,) (phases of measurement 0)."""
+        return np.asarray(self.meta["best_fit"], float)
+
+    @property
+    def comparison(self):
+        """Engine-count comparison table (list of dicts) when ``engines='auto'``."""
+        return self.meta.get("comparison")
+
+    # ---- draws ---------------------------------------------------------------------
+    def _var(self, name: str) -> np.ndarray:
+        v = self.idata.posterior[name].values
+        return v.reshape((-1,) + v.shape[2:])
+
+    @property
+    def n_draws(self) -> int:
+        return int(self.idata.posterior.sizes["draw"])
+
+    def draws(self, measurement: int | None = None) -> np.ndarray:
+        """Posterior draws as flat parameter vectors (n_draws, 13E).
+
+        Phases are per measurement; ``measurement`` picks one, None (default) takes
+        draw i's phases from measurement i mod M (all measurements used evenly).
+        """
+        n, e, m = self.n_draws, self.n_engines, self.n_measurements
+        x = np.empty((n, e, N_PARAMS))
+        for name in PARAM_NAMES:
+            v = self._var(name)
+            if name in PHASE_NAMES:
+                pick = np.arange(n) % m if measurement is None else np.full(n, int(measurement))
+                v = v[np.arange(n), pick]
+            x[:, :, IDX[name]] = v
+        return x.reshape(n, e * N_PARAMS)
+
+    # ---- summaries -------------------------------------------------------------------
+    def summary(self):
+        """pandas DataFrame, one row per parameter: mean, sd, q05, q95 (90% interval),
+        prior_sd, sd_ratio (posterior/prior; phases: circular variance 1 - R),
+        identified (sd_ratio <= 0.5), kind (linear / circular / fixed)."""
+        import pandas as pd
+
+        rows = {}
+        b = self.priors.bounds
+        for k in range(self.n_engines):
+            for name in ("Gamma",) + SHARED:
+                v = self._var(name)[:, k]
+                if name == "Gamma":
+                    if k == 0:
+                        rows[f"Gamma[0]"] = dict(mean=float(v[0]), sd=0.0, q05=float(v[0]), q95=float(v[0]),
+                                                 prior_sd=np.nan, sd_ratio=np.nan, identified=False, kind="fixed")
+                        continue
+                    lo, hi = b["lnG"]
+                    prior_sd, post = (hi - lo) / np.sqrt(12), np.log(v / self.priors.gamma0)
+                else:
+                    lo, hi = b[name]
+                    prior_sd, post = (hi - lo) / np.sqrt(12), v
+                q05, q95 = np.quantile(v, [0.05, 0.95])
+                ratio = float(np.std(post) / prior_sd)
+                rows[f"{name}[{k}]"] = dict(mean=float(np.mean(v)), sd=float(np.std(v)), q05=float(q05),
+                                            q95=float(q95), prior_sd=float(prior_sd), sd_ratio=ratio,
+                                            identified=ratio <= IDENTIFIED_RATIO, kind="linear")
+        for m in range(self.n_measurements):
+            for k in range(self.n_engines):
+                for name in PHASE_NAMES:
+                    cs = circular_stats(self._var(name)[:, m, k])
+                    ratio = 1.0 - cs["R"]
+                    rows[f"{name}[{k}]@{m}"] = dict(mean=cs["mean"], sd=cs["sd"], q05=cs["q05"], q95=cs["q95"],
+                                                    prior_sd=np.inf, sd_ratio=ratio,
+                                                    identified=ratio <= IDENTIFIED_RATIO, kind="circular")
+            for name in ("offset", "sigma"):
+                v = self._var(name)[:, m]
+                q05, q95 = np.quantile(v, [0.05, 0.95])
+                rows[f"{name}@{m}"] = dict(mean=float(np.mean(v)), sd=float(np.std(v)), q05=float(q05),
+                                           q95=float(q95), prior_sd=np.nan, sd_ratio=np.nan, identified=True,
+                                           kind="nuisance")
+        return pd.DataFrame.from_dict(rows, orient="index")
+
+    def report(self) -> str:
+        """Human-readable fit, convergence and posterior summary."""
+        import pandas as pd
+
+        d, f = self.diagnostics, self.fit
+        lines = [f"class {self.class_name}: {self.n_engines} engine(s), {self.n_measurements} measurement(s), "
+                 f"{self.n_draws} posterior draws",
+                 f"fit ({f['algorithm']}, {len(f['starts_misfit'])} starts, {f['seconds']:.1f} s): "
+                 f"misfit {f['misfit']:.2f}, {f['n_agree']} start(s) agree, noise sigma "
+                 f"{np.round(f['sigma'], 4).tolist()}"]
+        lines += [f"  note: {n}" for n in f["notes"]]
+        lines.append(f"MCMC: {d['n_walkers']} walkers x {d['chain_steps']} steps ({d['seconds']:.1f} s), "
+                     f"max tau {d['tau_max']:.0f} steps, chain/tau {d['steps_over_tau']:.1f}, "
+                     f"min ESS {d['ess_min']:.0f}, acceptance {d['acceptance_mean']:.2f}, "
+                     f"burn {d['burn']}, thin {d['thin']}")
+        lines.append(("converged: " if self.converged else "WARNING: ") + d["reason"])
+        if d.get("weak_engines"):
+            lines.append(f"WARNING: engine(s) {d['weak_engines']} stay near their prior (too weak to identify)")
+        unid = [k for k, v in d["identified"].items() if not v]
+        if unid:
+            lines.append(f"not identified (posterior sd > {IDENTIFIED_RATIO} x prior sd): {', '.join(unid)}")
+        if self.comparison:
+            lines.append("engine-count comparison (LOO):")
+            lines.append(pd.DataFrame(self.comparison).to_string(index=False))
+        with pd.option_context("display.width", 140, "display.max_rows", 500):
+            lines.append(self.summary()[["mean", "sd", "q05", "q95", "sd_ratio", "identified"]]
+                         .to_string(float_format=lambda v: f"{v:.4g}"))
+        return "\n".join(lines)
+
+    # ---- plots -------------------------------------------------------------------------
+    def _plot_matrix(self):
+        cols, names = [], []
+        for k in range(self.n_engines):
+            for name in SHARED + (("Gamma",) if k else ()):
+                cols.append(self._var(name)[:, k])
+                names.append(f"{name}[{k}]")
+            for name in PHASE_NAMES:
+                v = self._var(name)[:, 0, k]
+                mu = circular_stats(v)["mean"]
+                cols.append(wrap(v - mu) + mu)  # unwrapped around the circular mean
+                names.append(f"{name}[{k}]")
+        return np.column_stack(cols), names
+
+    def plot_corner(self, path, max_params: int = 24):
+        """Corner plot (corner) of the shared parameters and measurement 0's phases,
+        the best fit marked. Written atomically as PNG."""
+        import corner
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        from ..radar.io import atomic_write
+
+        data, names = self._plot_matrix()
+        data, names = data[:, :max_params], names[:max_params]
+        best = self.best_fit.reshape(self.n_engines, N_PARAMS)
+        truths = []
+        for n in names:
+            name, k = n.split("[")[0], int(n.split("[")[1][:-1])
+            truths.append(best[k, IDX[name]])
+        keep = np.std(data, axis=0) > 0
+        fig = corner.corner(data[:, keep], labels=[n for n, ok in zip(names, keep) if ok],
+                            truths=[t for t, ok in zip(truths, keep) if ok], quantiles=(0.05, 0.5, 0.95),
+                            show_titles=False, plot_datapoints=False, smooth=1.0)
+        fig.suptitle(f"{self.class_name} posterior ({'converged' if self.converged else 'NOT converged'})")
+        atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=70))
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+        return path
+
+    def plot_trace(self, path):
+        """Trace plot: every walker's path per sampled coordinate, burn-in shaded."""
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        import matplotlib.pyplot as plt
+
+        from ..radar.io import atomic_write
+
+        tr = self.idata["chain_trace"]
+        chain, steps = tr["theta"].values, tr["step"].values
+        names = list(tr["coord"].values)
+        n = len(names)
+        ncol = 3
+        nrow = int(np.ceil((n + 1) / ncol))
+        fig, axes = plt.subplots(nrow, ncol, figsize=(4 * ncol, 1.6 * nrow), sharex=True, squeeze=False)
+        burn = self.diagnostics["burn"]
+        for i, ax in enumerate(axes.ravel()):
+            if i < n:
+                ax.plot(steps, chain[:, :, i], lw=0.3, alpha=0.4, color="k")
+                ax.set_ylabel(names[i], fontsize=7)
+            elif i == n:
+                ax.plot(steps, tr["lp"].values, lw=0.3, alpha=0.4, color="C0")
+                ax.set_ylabel("log post", fontsize=7)
+            else:
+                ax.axis("off")
+                continue
+            ax.axvspan(0, burn, color="C3", alpha=0.1)
+            ax.tick_params(labelsize=6)
+        fig.suptitle(f"{self.class_name}: walkers' paths (burn-in shaded); {self.diagnostics['reason']}", fontsize=8)
+        fig.tight_layout()
+        atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=80))
+        plt.close(fig)
+        return path
+
+    # ---- files ---------------------------------------------------------------------------
+    def save(self, path) -> Path:
+        """Write NetCDF atomically (a temporary file in the same folder, then rename)."""
+        from ..radar.io import check_writable
+
+        path = check_writable(path)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        os.close(fd)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                self.idata.to_netcdf(tmp, engine="h5netcdf")
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+        return path
+
+    @classmethod
+    def load(cls, path, *, class_name: str | None = None, n_engines: int | None = None) -> "CalibrationResult":
+        """Read a posterior written by :meth:`save`; ``class_name`` / ``n_engines``
+        check that it is the posterior expected (clear errors otherwise)."""
+        from ..radar import DataFileError
+
+        path = Path(path)
+        if not path.exists():
+            raise DataFileError(f"{path}: posterior file not found")
+        az = import_arviz()
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                idata = az.from_netcdf(str(path), engine="h5netcdf")
+        except Exception as exc:  # h5py/netCDF raise many types for a foreign file
+            raise DataFileError(f"{path}: not a NetCDF posterior ({type(exc).__name__}: {exc})") from exc
+        if "posterior" not in idata.groups():
+            raise DataFileError(f"{path}: no 'posterior' group; not an mdaug posterior")
+        try:
+            res = cls(idata)
+        except ValueError as exc:
+            raise DataFileError(f"{path}: {exc}") from exc
+        if class_name is not None and res.class_name != class_name.upper():
+            raise DataFileError(f"{path}: posterior of class {res.class_name!r}, expected {class_name.upper()!r}")
+        if n_engines is not None and res.n_engines != int(n_engines):
+            raise DataFileError(f"{path}: posterior has {res.n_engines} engine(s), expected {n_engines}")
+        return res

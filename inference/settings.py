@@ -1,0 +1,101 @@
+"""Settings of a calibration run (one frozen dataclass, presets as classmethods)."""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+FIT_ALGORITHMS = ("GN_CRS2_LM", "GN_MLSL_LDS", "GN_DIRECT_L", "GN_ISRES", "GN_ESCH")
+LOCAL_ALGORITHMS = ("LN_BOBYQA", "LN_NELDERMEAD", "LN_SBPLX")
+
+
+@dataclass(frozen=True)
+class CalibrationSettings:
+    """How a calibration runs.
+
+    Fit (nlopt): ``n_starts`` independent runs of ``fit_algorithm`` (a global
+    algorithm, ``fit_budget`` objective evaluations each, seeded from the run's seed)
+    followed by ``local_algorithm`` with ``polish_budget`` evaluations.
+
+    MCMC (emcee): ``n_walkers`` walkers (0 = 3 x dimensions; at least 2 x dim + 2 and 32), run in
+    blocks of ``check_every`` steps until the chain is ``min_tau_multiple`` integrated
+    autocorrelation times long and tau changed by less than ``tau_rtol`` between
+    checks, or ``max_steps`` is reached (then the result is flagged not converged).
+    Burn-in ``burn_tau`` x max tau, thinning ``thin_tau`` x min tau (at least 1).
+    ``store_every``: keep every k-th step in memory and in the HDF5 checkpoint (0 =
+    auto: the chain stays under ~160 MB; tau, burn-in and thinning count steps).
+    Walkers start at the best fit + ``init_ball`` x the local curvature scale of
+    every coordinate (see :func:`.sampler.curvature_scales`); with ``init_modes``
+    they are split over every distinct fit start within 10 nats of the best (rival
+    modes), so a multimodal posterior is started on all the modes the fit found.
+
+    Model: ``normalisation`` of measured and model profiles (SPEC section 2);
+    ``alignment`` ``tone`` (default) compares the data with model windows centred on
+    the carrier bin and fits a per-measurement offset of the tone (uniform on the
+    priors' ``offset_bins``, +-4 bins by default), ``peak`` uses f(x)'s argmax
+    centring (discontinuous in the parameters; offset then +-0.5 bins, sub-bin);
+    see :meth:`.likelihood.LogPosterior.model`. ``range_offset`` False fixes the
+    offset at 0. Noise is Gaussian, iid over bins, with a per-measurement
+    level sigma (log-uniform prior on [sigma_min, sigma_max], in normalised units).
+    ``dtype``: precision of f(x) (float32 is ~2x faster, error ~1e-7 of the peak).
+    ``threads``: BLAS/FFT threads (the calibrate verb pins them; 1 is the default).
+    """
+
+    fit_algorithm: str = "GN_CRS2_LM"
+    local_algorithm: str = "LN_BOBYQA"
+    n_starts: int = 4
+    fit_budget: int = 6000
+    polish_budget: int = 2000
+    n_walkers: int = 0
+    max_steps: int = 30000
+    check_every: int = 500
+    store_every: int = 0
+    min_tau_multiple: float = 50.0
+    tau_rtol: float = 0.05
+    burn_tau: float = 3.0
+    thin_tau: float = 0.5
+    init_ball: float = 0.5
+    init_modes: bool = True
+    normalisation: str = "peak"
+    range_offset: bool = True
+    alignment: str = "tone"
+    sigma_min: float = 1e-4
+    sigma_max: float = 1.0
+    dtype: str = "float32"
+    threads: int = 1
+    progress: bool = False
+
+    def __post_init__(self) -> None:
+        if self.fit_algorithm not in FIT_ALGORITHMS:
+            raise ValueError(f"fit_algorithm must be one of {FIT_ALGORITHMS}, got {self.fit_algorithm!r}")
+        if self.local_algorithm not in LOCAL_ALGORITHMS + ("none",):
+            raise ValueError(f"local_algorithm must be one of {LOCAL_ALGORITHMS} or 'none', "
+                             f"got {self.local_algorithm!r}")
+        positive = {"n_starts": self.n_starts, "fit_budget": self.fit_budget, "max_steps": self.max_steps,
+                    "check_every": self.check_every, "min_tau_multiple": self.min_tau_multiple,
+                    "threads": self.threads, "init_ball": self.init_ball}
+        for name, value in positive.items():
+            if not value > 0:
+                raise ValueError(f"CalibrationSettings.{name} must be > 0, got {value!r}")
+        if self.n_walkers < 0 or self.polish_budget < 0 or self.store_every < 0:
+            raise ValueError("CalibrationSettings.n_walkers, polish_budget and store_every must be >= 0")
+        if not 0 < self.sigma_min < self.sigma_max:
+            raise ValueError(f"need 0 < sigma_min < sigma_max, got {self.sigma_min}, {self.sigma_max}")
+        if self.alignment not in ("tone", "peak"):
+            raise ValueError(f"alignment must be 'tone' or 'peak', got {self.alignment!r}")
+        if self.dtype not in ("float32", "float64"):
+            raise ValueError(f"dtype must be float32 or float64, got {self.dtype!r}")
+
+    @classmethod
+    def quick(cls, **kw) -> "CalibrationSettings":
+        """A few-second HELI run for tests and ``--quick``: small fit budget, short
+        chain. It will usually end before 50 tau and say so (converged=False)."""
+        base = dict(n_starts=2, fit_budget=1000, polish_budget=2000, max_steps=1000, check_every=250,
+                    n_walkers=32)
+        base.update(kw)
+        return cls(**base)
+
+    def replace(self, **kw) -> "CalibrationSettings":
+        return dataclasses.replace(self, **kw)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)

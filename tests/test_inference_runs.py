@@ -1,0 +1,199 @@
+"""Calibration runs: resume from HDF5, hard cases, CLI verbs, SBC, engine-count choice."""
+import warnings
+
+import numpy as np
+import pytest
+
+from mdaug.cli import main
+from mdaug.generator import IDX, N_PARAMS, ClassParams, load_dataset, load_reference, profiles
+from mdaug.inference import CalibrationResult, CalibrationSettings, LogPosterior, calibrate
+from mdaug.radar import RadarConfig, atomic_savez
+
+HELI = load_reference("HELI")
+RADAR = RadarConfig()
+TINY = CalibrationSettings.quick(n_starts=1, fit_budget=300, polish_budget=200, max_steps=300, check_every=100)
+
+
+def heli_profile(x=None, noise=0.01, seed=0):
+    x = HELI.to_array() if x is None else x
+    rng = np.random.default_rng(seed)
+    return np.abs(profiles(x)[0] + noise * rng.standard_normal(400))
+
+
+def quiet_calibrate(*args, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return calibrate(*args, **kw)
+
+
+@pytest.mark.parametrize("store_every", [1, 3])
+def test_interrupted_run_resumes_to_the_uninterrupted_chain(tmp_path, monkeypatch, store_every):
+    y = heli_profile(seed=1)
+    settings = TINY.replace(store_every=store_every)
+    full = quiet_calibrate(y, "HELI", settings=settings, random_state=5, backend_path=tmp_path / "a.h5")
+    calls = {"n": 0}
+    original = LogPosterior.__call__
+
+    def flaky(self, theta):
+        calls["n"] += 1
+        if calls["n"] == 250:  # mid-run, mid-block
+            raise KeyboardInterrupt
+        return original(self, theta)
+
+    monkeypatch.setattr(LogPosterior, "__call__", flaky)
+    with pytest.raises(KeyboardInterrupt):
+        quiet_calibrate(y, "HELI", settings=settings, random_state=5, backend_path=tmp_path / "b.h5")
+    monkeypatch.setattr(LogPosterior, "__call__", original)
+    resumed = quiet_calibrate(y, "HELI", settings=settings, random_state=5, backend_path=tmp_path / "b.h5")
+    assert 0 < resumed.diagnostics["resumed_at"] < TINY.max_steps
+    assert resumed.diagnostics["store_every"] == store_every
+    np.testing.assert_array_equal(resumed.draws(), full.draws())
+    np.testing.assert_array_equal(resumed.idata.chain_trace["theta"].values, full.idata.chain_trace["theta"].values)
+    # a budget extension continues the same file (the fingerprint ignores max_steps)
+    longer = quiet_calibrate(y, "HELI", settings=settings.replace(max_steps=400), random_state=5,
+                             backend_path=tmp_path / "b.h5")
+    k = store_every
+    assert longer.diagnostics["chain_steps"] == 400 // k * k and longer.diagnostics["resumed_at"] == 300 // k * k
+    # another problem is refused
+    with pytest.raises(ValueError, match="different problem"):
+        quiet_calibrate(y, "HELI", settings=settings, random_state=6, backend_path=tmp_path / "b.h5")
+
+
+def test_hard_case_equal_roll_and_pitch_frequencies():
+    from mdaug.inference import Layout, Priors, prepare_measured
+
+    x = HELI.to_array().copy()
+    x[IDX["w_b"]] = x[IDX["w_a"]]  # w_m = C_m |w_a - w_b| = 0 whatever C_m is
+    y = heli_profile(x, seed=2)
+    data, _ = prepare_measured(y, RADAR, "peak")
+    post = LogPosterior(data, Layout(1, 1, Priors.from_reference(HELI)), RADAR)
+    z = np.repeat(post.layout.z_from_physics(x)[None], 5, axis=0)
+    z[:, post.layout.shared_col(0, "C_m")] = np.linspace(0.5, 1.5, 5)
+    np.testing.assert_allclose(post.misfit(z), post.misfit(z[:1]).repeat(5), rtol=1e-12)  # C_m has no effect
+    theta = post.layout.theta_from_z(z, np.full((5, 1), -4.0))
+    assert np.all(post(theta) == -np.inf)  # w_a = w_b is outside the ordered prior (the mirror's fixed line)
+    x[IDX["w_b"]] = x[IDX["w_a"]] * 1.002  # just inside: the sampler must cope
+    res = quiet_calibrate(heli_profile(x, seed=2), "HELI", settings=CalibrationSettings.quick(), random_state=1)
+    table = res.summary()
+    assert np.all(np.isfinite(res.draws())) and np.all(np.isfinite(table[["mean", "sd", "q05", "q95"]].values))
+    d = res.draws()
+    gap = np.median(np.abs(d[:, IDX["w_b"]] - d[:, IDX["w_a"]]))
+    # honest either way: C_m is flagged unidentified, or the posterior explains the
+    # profile with separated w_a, w_b (then C_m acts on a real difference line)
+    assert (not table.loc["C_m[0]", "identified"]) or gap > 20 * 0.002 * x[IDX["w_a"]]
+
+
+def test_hard_case_weak_engine_is_flagged():
+    strong = HELI.to_array()
+    weak = strong.copy()
+    weak[IDX["Gamma"]] *= 0.02  # its sidebands sit far below the 1% noise
+    weak[[IDX["w_a"], IDX["w_b"]]] *= 1.6
+    x2 = np.concatenate([strong, weak])
+    y = heli_profile(x2, seed=3)
+    # the two-engine truth as reference (prior centre and first fit start)
+    ref2 = ClassParams.from_array(x2, name="HELI")
+    res = quiet_calibrate(y, ref2, settings=CalibrationSettings.quick(), random_state=2)
+    assert res.n_engines == 2 and np.all(np.isfinite(res.draws()))
+    assert res.diagnostics["weak_engines"] == [1]
+    table = res.summary()
+    assert table.loc["w_a[0]", "identified"] and table.loc["A_b[0]", "identified"]  # the strong one is pinned
+    assert "too weak" in res.report()
+
+
+def test_bad_inputs_give_clear_errors(tmp_path):
+    with pytest.raises(ValueError, match="all zeros"):
+        calibrate(np.zeros(400), "HELI", settings=TINY)
+    with pytest.raises(ValueError, match="expected 400"):
+        calibrate(np.ones(399), "HELI", settings=TINY)
+    with pytest.raises(ValueError, match="unknown class"):
+        calibrate(heli_profile(), "PLANE", settings=TINY)
+    with pytest.raises(ValueError, match="engines must be"):
+        calibrate(heli_profile(), "HELI", engines=0, settings=TINY)
+    with pytest.raises(ValueError, match="fit_algorithm"):
+        CalibrationSettings(fit_algorithm="GN_NOPE")
+    bogus = tmp_path / "x.h5"
+    bogus.write_text("not hdf5")
+    with pytest.raises(ValueError, match="x.h5"):
+        calibrate(heli_profile(), "HELI", settings=TINY, backend_path=bogus)
+
+
+def test_cli_calibrate_and_posterior_augment(tmp_path, capsys):
+    meas = tmp_path / "m.npz"
+    y = np.stack([heli_profile(seed=4), heli_profile(load_reference("QUAD").to_array(), seed=5)])
+    atomic_savez(meas, profiles=y, labels=np.array(["HELI", "QUAD"]))
+    out = tmp_path / "post_heli.nc"
+    rc = main(["calibrate", str(meas), "--class", "HELI", "--quick", "--seed", "3", "--out", str(out),
+               "--trace", str(tmp_path / "t.png")])
+    text = capsys.readouterr()
+    res = CalibrationResult.load(out)
+    assert rc == (0 if res.converged else 3)
+    assert "mean" in text.out and "q05" in text.out and "max tau" in text.out
+    if not res.converged:
+        assert "did not converge" in text.err
+    assert (tmp_path / "t.png").exists() and not list(tmp_path.glob("*.chain.h5*"))
+    # class absent from the file -> exit 2 naming the file and class
+    assert main(["calibrate", str(meas), "--class", "DRONEX", "--quick", "--out", str(tmp_path / "z.nc")]) == 2
+    assert "DRONEX" in capsys.readouterr().err
+    aug = tmp_path / "aug.npz"
+    assert main(["augment", "--posterior", f"HELI={out}", "--n-per-class", "50", "--seed", "1",
+                 "--out", str(aug)]) == 0
+    ds = load_dataset(aug)
+    assert ds.profiles.shape == (50, 400) and ds.settings["strategy"] == "posterior"
+    assert ds.params["HELI"].shape == (50, N_PARAMS)
+    # a posterior given under another class name is refused
+    assert main(["augment", "--posterior", f"QUAD={out}", "--n-per-class", "5", "--out", str(aug)]) == 2
+    assert "expected 'QUAD'" in capsys.readouterr().err
+    # without --posterior the sigma_P path still runs
+    assert main(["augment", "--classes", "HELI", "--n-per-class", "5", "--out", str(tmp_path / "s.npz")]) == 0
+    assert load_dataset(tmp_path / "s.npz").settings["strategy"] == "sigma_p"
+
+
+def test_sbc_short_ranks_are_not_grossly_biased():
+    from mdaug.inference.sbc import run_sbc
+
+    out = run_sbc("HELI", 4, settings=TINY.replace(max_steps=400), seed=11, n_rank=19, n_bins=2)
+    assert out["ranks"].shape == (4, len(out["names"]))
+    assert np.all((out["ranks"] >= 0) & (out["ranks"] <= 19))
+    assert 0.0 <= out["pooled_p"] <= 1.0
+    # most test quantities' truths rank strictly inside the draws at least once (a sampler
+    # stuck away from the truth puts every rank at 0 or 19)
+    assert ((out["ranks"] > 0) & (out["ranks"] < 19)).any(axis=0).mean() > 0.6
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(reason="known limitation: on the multimodal single-profile HELI posterior the ensemble "
+                          "does not mix within the budget, so posteriors are too narrow (see "
+                          "tests/benchmarks/inference.py, section 6)", strict=False)
+def test_sbc_uniform_ranks():
+    from mdaug.inference.sbc import run_sbc
+
+    out = run_sbc("HELI", 24, settings=CalibrationSettings.quick(max_steps=3000), seed=3, n_rank=49, n_bins=4)
+    print("SBC pooled p", out["pooled_p"], "min p", out["min_p"])
+    assert out["pooled_p"] > 1e-3
+
+
+@pytest.mark.slow
+def test_engine_count_auto_prefers_one_engine_for_heli():
+    res = quiet_calibrate(heli_profile(noise=0.005, seed=9), "HELI", engines="auto",
+                          settings=CalibrationSettings.quick(max_steps=2000), random_state=4, candidates=(1, 2))
+    table = {row["engines"]: row for row in res.comparison}
+    assert set(table) == {1, 2} and res.n_engines == 1 and table[1]["chosen"]
+    assert "engine-count comparison" in res.report()
+
+
+def test_several_measurements_share_physics_not_phases():
+    x1 = HELI.to_array().copy()
+    x2 = x1.copy()
+    x2[[IDX["phi_a"], IDX["phi_b"], IDX["phi_p"], IDX["phi_m"]]] += [2.0, -1.5, 1.0, 2.5]  # another rotor phase
+    y = np.stack([heli_profile(x1, seed=6), heli_profile(x2, seed=7)])
+    res = quiet_calibrate(y, "HELI", settings=CalibrationSettings.quick(), random_state=8)
+    assert res.n_measurements == 2
+    assert res.idata.posterior["phi_a"].shape[2:] == (2, 1)  # (measurement, engine)
+    assert res.idata.posterior["w_a"].shape[2:] == (1,)  # shared
+    d0, d1 = res.draws(measurement=0), res.draws(measurement=1)
+    np.testing.assert_array_equal(d0[:, IDX["w_a"]], d1[:, IDX["w_a"]])
+    assert not np.allclose(d0[:, IDX["phi_a"]], d1[:, IDX["phi_a"]])
+    table = res.summary()
+    assert {"phi_a[0]@0", "phi_a[0]@1", "sigma@0", "sigma@1"} <= set(table.index)
+    for m in (0, 1):  # one noise level per measurement, both near the 1% used
+        assert 0.007 < table.loc[f"sigma@{m}", "mean"] < 0.013

@@ -1,0 +1,110 @@
+"""`mdaug run --quick` end to end: results, report, resume, user files."""
+import csv
+import json
+import re
+import shutil
+
+import numpy as np
+import pytest
+
+from mdaug.cli import main
+from mdaug.reports.report import SECTIONS
+from mdaug.reports.study import Study
+
+
+@pytest.fixture(scope="module")
+def quick_study(tmp_path_factory):
+    out = tmp_path_factory.mktemp("study") / "run"
+    assert main(["run", "--quick", "--out", str(out), "--seed", "3"]) == 0
+    return out
+
+
+def lookup(results, key):
+    v = results
+    for part in key.split("."):
+        v = v[part] if isinstance(v, dict) else v[int(part)]
+    return v
+
+
+def test_quick_study_writes_results_that_match_its_report(quick_study):
+    results = json.loads((quick_study / "results.json").read_text())
+    page = (quick_study / "report.html").read_text()
+    for sid in SECTIONS:
+        assert f'<section id="{sid}">' in page, sid
+    cells = re.findall(r'data-key="([^"]+)">([^<\s]+)', page)
+    assert len(cells) > 60
+    for key, shown in cells:
+        value = lookup(results, key)
+        if shown == "–":
+            assert value is None, key
+        else:
+            decimals = len(shown.split(".")[1]) if "." in shown else 0
+            assert float(shown) == pytest.approx(float(value), abs=0.51 * 10.0 ** -decimals), key
+    assert page.count("data:image/png;base64,") >= 8 and 'src="http' not in page
+    assert "simulated" in page
+
+
+def test_quick_study_compares_every_strategy_with_intervals(quick_study):
+    results = json.loads((quick_study / "results.json").read_text())
+    assert set(results["strategies"]) == {"sigma_p", "sigma_p_uniform", "posterior", "tsaug"}
+    for name, s in results["strategies"].items():
+        m = s["tests"]["new"]
+        assert 0 <= m["accuracy"] <= 1 and m["n"] == sum(results["data"]["new"]["per_class"].values())
+        lo, hi = m["ci"]["accuracy"]
+        assert lo <= m["accuracy"] <= hi
+        assert set(m["per_class"]) == {"HELI", "QUAD"}
+    for nuisance in results["config"]["protocol"]["nuisances"]:
+        rows = results["sweeps"][nuisance]["rows"]
+        assert {r["sigma_p"] for r in rows} == set(results["config"]["protocol"]["sigma_p"])
+    assert results["sigma_p_choice"]["non_peeking"]["test_set"] == "old"
+    assert results["sigma_p_choice"]["published_peeking"]["test_set"] == "new"
+    assert {"data", "calibrate_HELI", "calibrate_QUAD", "cnn_posterior"} <= set(results["timings"])
+    assert results["ceiling"]["models"]["xgb"]["tests"]["new"]["accuracy"] >= 0
+
+
+def test_rerun_resumes_from_cached_stages(quick_study, tmp_path):
+    out = tmp_path / "again"
+    shutil.copytree(quick_study, out)
+    (out / "stages" / "cnn_tsaug.json").unlink()
+    (out / "results.json").unlink()
+    assert main(["run", "--quick", "--out", str(out), "--seed", "3"]) == 0
+    first = json.loads((quick_study / "results.json").read_text())
+    second = json.loads((out / "results.json").read_text())
+    assert "cnn_tsaug" not in second["resumed_stages"]
+    assert {"data", "calibrate_HELI", "sweep_published", "cnn_sigma_p"} <= set(second["resumed_stages"])
+    # recomputed with the same seed: the same metrics
+    assert second["strategies"]["tsaug"]["tests"] == first["strategies"]["tsaug"]["tests"]
+
+
+@pytest.mark.slow
+def test_interrupted_run_resumes_and_user_files_run_the_same_study(quick_study, tmp_path, monkeypatch):
+    """A config pointing at NPZ, CSV and .mat files; interrupted once, then finished."""
+    from scipy.io import savemat
+
+    data = quick_study / "data"
+    for cls in ("HELI", "QUAD"):
+        shutil.copy(data / f"calibration_{cls}.npz", tmp_path / f"cal_{cls}.npz")
+    with np.load(data / "new.npz") as f:
+        savemat(tmp_path / "new.mat", {"profiles": f["profiles"], "labels": f["labels"]})
+    with np.load(data / "old.npz") as f, open(tmp_path / "old.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow([f"b{i}" for i in range(f["profiles"].shape[1])] + ["label"])
+        for row, lab in zip(f["profiles"], f["labels"]):
+            w.writerow([*row, lab])
+    (tmp_path / "study.toml").write_text(
+        'seed = 4\n[data]\ncalibration = { HELI = "cal_HELI.npz", QUAD = "cal_QUAD.npz" }\n'
+        'test = { old = "old.csv", new = "new.mat" }\n')
+    out = tmp_path / "out"
+
+    def interrupt(*_a, **_k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Study, "profiles_figure", interrupt)
+    assert main(["run", "--quick", "--config", str(tmp_path / "study.toml"), "--out", str(out)]) == 130
+    assert not (out / "results.json").exists()
+    monkeypatch.undo()
+    assert main(["run", "--quick", "--config", str(tmp_path / "study.toml"), "--out", str(out)]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert {"data", "calibrate_HELI", "calibrate_QUAD", "cnn_tsaug"} <= set(results["resumed_stages"])
+    assert results["simulated"] is False and results["ceiling"] is None
+    assert results["data"]["new"]["n"] == json.loads((quick_study / "results.json").read_text())["data"]["new"]["n"]
