@@ -9,21 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..radar import check_normalisation, normalise
+from ..radar import as_profile_array, check_normalisation, normalise
 
 
 def as_profiles(profiles, what: str = "profiles") -> np.ndarray:
     """Check and return profiles as a finite numeric (N, L) array (1-D -> one row)."""
-    x = np.asarray(profiles)
-    if x.dtype == object or not np.issubdtype(x.dtype, np.number):
-        raise ValueError(f"{what} must be a numeric (N, L) array, got dtype {x.dtype}")
-    if x.ndim == 1:
-        x = x[None, :]
-    if x.ndim != 2 or x.shape[0] == 0 or x.shape[1] < 2:
-        raise ValueError(f"{what} must be a non-empty (N, L) array, got shape {x.shape}")
-    if not np.all(np.isfinite(x)):
-        raise ValueError(f"{what} hold NaN or inf (first in row {int(np.argwhere(~np.isfinite(x))[0, 0])})")
-    return x
+    return as_profile_array(profiles, what)
 
 
 def preprocess(profiles, normalisation: str = "peak") -> np.ndarray:

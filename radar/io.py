@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .profiles import as_profile_array
+
 
 class DataFileError(ValueError):
     """A data file is missing, unreadable or holds the wrong thing."""
@@ -54,6 +56,12 @@ class ProfileSet:
         return self.profiles[mask]
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def check_writable(path) -> Path:
     """Fail early (before any work) when ``path`` cannot be written."""
     path = Path(path)
@@ -81,6 +89,7 @@ def atomic_write(path, write) -> Path:
     try:
         with os.fdopen(fd, "wb") as fh:
             write(fh)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600 files; give the usual mode
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -94,17 +103,7 @@ def atomic_savez(path, **arrays) -> Path:
 
 
 def _check_profiles(profiles, labels, src: str) -> tuple[np.ndarray, np.ndarray]:
-    profiles = np.asarray(profiles)
-    if profiles.dtype == object or not np.issubdtype(profiles.dtype, np.number):
-        raise DataFileError(f"{src}: field 'profiles' must be numeric, got dtype {profiles.dtype}")
-    if profiles.ndim == 1:
-        profiles = profiles[None, :]
-    if profiles.ndim != 2 or profiles.shape[0] == 0 or profiles.shape[1] < 2:
-        raise DataFileError(f"{src}: field 'profiles' must be a non-empty (N, L) array, got shape {profiles.shape}")
-    profiles = profiles.astype(np.float64)
-    if not np.all(np.isfinite(profiles)):
-        bad = int(np.argwhere(~np.isfinite(profiles))[0, 0])
-        raise DataFileError(f"{src}: field 'profiles' holds NaN or inf (first in row {bad})")
+    profiles = as_profile_array(profiles, f"{src}: field 'profiles'", DataFileError).astype(np.float64)
     labels = np.asarray(labels)
     if labels.dtype == object:
         labels = np.array([str(np.squeeze(v)) for v in labels.ravel()])

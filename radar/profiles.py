@@ -27,6 +27,24 @@ def check_normalisation(name: str) -> str:
     return name
 
 
+def as_profile_array(profiles, what: str = "profiles", error: type[Exception] = ValueError) -> np.ndarray:
+    """Check and return profiles as a finite numeric (N, L) array (1-D -> one row).
+
+    ``what`` names the input in the message (e.g. ``"f.npz: field 'profiles'"``);
+    ``error`` is the exception type raised.
+    """
+    x = np.asarray(profiles)
+    if x.dtype == object or not np.issubdtype(x.dtype, np.number):
+        raise error(f"{what} must be a numeric (N, L) array, got dtype {x.dtype}")
+    if x.ndim == 1:
+        x = x[None, :]
+    if x.ndim != 2 or x.shape[0] == 0 or x.shape[1] < 2:
+        raise error(f"{what} must be a non-empty (N, L) array, got shape {x.shape}")
+    if not np.all(np.isfinite(x)):
+        raise error(f"{what} holds NaN or inf (first in row {int(np.argwhere(~np.isfinite(x))[0, 0])})")
+    return x
+
+
 def normalise(profiles: np.ndarray, method: str = "peak", db_floor: float = DB_FLOOR) -> np.ndarray:
     """Normalise each row of ``profiles`` (..., L) of linear magnitudes.
 

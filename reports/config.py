@@ -61,6 +61,7 @@ class ProtocolConfig:
     sweep_n_per_class: int = 4000     # 8,000 training profiles: +-2 points of 32,000, 4x faster
     cnn_n_per_class: int = 16000
     cnn_epochs: int = 50
+    cnn_patience: int | None = 10   # early stopping on validation loss; None trains all epochs
     tsaug_n_per_class: int = 4000
     tsaug_epochs: int = 100
     nuisances: tuple[str, ...] = tuple(NUISANCE_PRESETS)

@@ -146,7 +146,7 @@ class Study:
             checkpoint.unlink(missing_ok=True)  # only needed to resume an interrupted chain
             corner_png = self.out / "figures" / f"corner_{cls}.png"
             trace_png = self.out / "figures" / f"trace_{cls}.png"
-            res.plot_corner(corner_png)
+            res.plot_corner(corner_png, max_params=16)  # a 52-parameter corner is unreadable
             res.plot_trace(trace_png)
             return {"posterior": str(nc), "corner": str(corner_png), "trace": str(trace_png),
                     "converged": bool(res.converged), "diagnostics": _jsonable(res.diagnostics),
@@ -189,8 +189,15 @@ class Study:
     # ---- stage 5: CNN per strategy -----------------------------------------------
     def cnn_jobs(self, sigma_p: float, tests: dict, calib: dict) -> list[dict]:
         p = self.cfg.protocol
-        cal_X = np.concatenate([self.load_set(f"calibration_{c}")[0] for c in self.cfg.classes])
-        cal_y = np.concatenate([self.load_set(f"calibration_{c}")[1] for c in self.cfg.classes])
+        # tsaug (as published) augments the measurements of the old drones: the
+        # calibration profiles and the 'old' set; it is then tested only on sets that
+        # share no profile with its sources
+        sources = [self.load_set(f"calibration_{c}") for c in self.cfg.classes]
+        if "old" in tests:
+            sources.append(tests["old"])
+        src_X = np.concatenate([s[0] for s in sources])
+        src_y = np.concatenate([s[1] for s in sources])
+        unseen = {k: v for k, v in tests.items() if k not in ("old", "mix")}
         out = []
         for name in p.cnn_strategies:
             job = {"name": name, "model": "cnn", "classes": list(self.cfg.classes), "tests": tests,
@@ -198,14 +205,15 @@ class Study:
                    "seed": _seed(self.cfg, "cnn", name),
                    "model_path": str(self.out / "models" / f"cnn_{name}.zip")}
             if name == "tsaug":
-                job.update(strategy_kind="tsaug", profiles=cal_X, labels=cal_y, n_per_class=p.tsaug_n_per_class,
-                           model_params={"epochs": p.tsaug_epochs})
+                job.update(strategy_kind="tsaug", profiles=src_X, labels=src_y, n_per_class=p.tsaug_n_per_class,
+                           model_params={"epochs": p.tsaug_epochs, "patience": p.cnn_patience},
+                           tests=unseen or tests)
             else:
                 job.update(strategy_kind="posterior" if name == "posterior" else "sigma_p",
                            sigma_p=sigma_p, n_per_class=p.cnn_n_per_class,
                            nuisance=dataclasses.asdict(NUISANCE_PRESETS[STRATEGY_NUISANCE[name]]),
                            posteriors={c: calib[c]["posterior"] for c in self.cfg.classes},
-                           model_params={"epochs": p.cnn_epochs})
+                           model_params={"epochs": p.cnn_epochs, "patience": p.cnn_patience})
             out.append(job)
         return out
 

@@ -55,3 +55,13 @@ def test_unwritable_output_fails_before_any_work(tmp_path, capsys):
     out = tmp_path / "missing" / "x.npz"
     assert main(["augment", "--out", str(out), "--n-per-class", "5"]) == 2
     assert f"{out}: cannot write, folder" in capsys.readouterr().err
+
+
+def test_outputs_get_the_usual_file_mode(tmp_path):
+    import os
+
+    out = tmp_path / "m.npz"
+    assert main(["augment", "--classes", "HELI", "--n-per-class", "3", "--out", str(out)]) == 0
+    mask = os.umask(0)
+    os.umask(mask)
+    assert (out.stat().st_mode & 0o777) == (0o666 & ~mask)
