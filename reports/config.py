@@ -69,9 +69,9 @@ class ProtocolConfig:
     normalisation: str = "peak"
     n_boot: int = 1000
     # calibration budget: one noisy profile gives a multimodal posterior that does not
-    # reach 50 tau even in 30,000 steps; 8,000 steps keep posterior means within ~0.1 sd
-    # of a 24,000-step chain (tests/benchmarks/inference.py) at a quarter of the time
-    calibration_max_steps: int = 8000
+    # reach 50 tau even in 30,000 steps; 4,000 steps keep posterior means within ~0.1 sd
+    # of a 24,000-step chain (tests/benchmarks/inference.py) at a sixth of the time
+    calibration_max_steps: int = 4000
     calibration_starts: int = 4
     calibration_fit_budget: int = 6000
 

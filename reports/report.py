@@ -192,6 +192,8 @@ def _speed(r: dict) -> str:
                     f"{cell(r, f'strategies.{n}.tests.' + ('new' if 'new' in s['tests'] else next(iter(s['tests']))) + '.accuracy')}</tr>"
                     for n, s in r["strategies"].items())
     return (f"<p>Total {r['total_seconds']:.1f} s; stages resumed from cache: {', '.join(r['resumed_stages']) or 'none'}.</p>"
+            "<h3>Every stage: time against its error figure</h3><table><tr><th>stage</th><th>seconds</th>"
+            "<th>error figure</th><th>value</th></tr>" + "".join(_stage_rows(r)) + "</table>"
             "<h3>Stage timings (s)</h3><table>" + "".join(rows) + "</table>"
             "<h3>Generator: speed against error</h3><table><tr><th>setting</th><th>profiles/s</th><th>error</th>"
             f"<th>metric</th></tr>{gen}</table>"
@@ -199,6 +201,31 @@ def _speed(r: dict) -> str:
             f"<th>accuracy</th></tr>{strat}</table>"
             "<p>Fast classifiers: see the train-seconds column of the sigma_P tables. Calibration: chain length, "
             "tau and ESS are in the calibration diagnostics.</p>")
+
+
+def _stage_rows(r: dict) -> list[str]:
+    """One row per stage: its wall time and the accuracy/convergence figure it produced."""
+    out = []
+
+    def row(stage, what, key):
+        if stage in r["timings"]:
+            out.append(f"<tr><td>{html.escape(stage)}</td>{cell(r, f'timings.{stage}', 2)}"
+                       f"<td>{html.escape(what)}</td>{cell(r, key)}</tr>")
+
+    for cls, c in r["calibration"].items():
+        for k, what in (("steps_over_tau", "chain length / max tau (need 50)"), ("ess_min", "min ESS")):
+            if isinstance(c["diagnostics"].get(k), (int, float)):
+                row(f"calibrate_{cls}", what, f"calibration.{cls}.diagnostics.{k}")
+    for nuisance, sw in r["sweeps"].items():
+        best = max(range(len(sw["rows"])), key=lambda i: (sw["rows"][i]["test_set"] == "new", sw["rows"][i]["accuracy"]))
+        row(f"sweep_{nuisance}", f"best accuracy ({sw['rows'][best]['model']}, sigma_P {sw['rows'][best]['sigma_p']}, "
+            f"{sw['rows'][best]['test_set']})", f"sweeps.{nuisance}.rows.{best}.accuracy")
+    for name, st in r["strategies"].items():
+        test = "new" if "new" in st["tests"] else next(iter(st["tests"]))
+        row(f"cnn_{name}", f"accuracy on {test}", f"strategies.{name}.tests.{test}.accuracy")
+    if r.get("ceiling"):
+        row("ceiling", "xgb accuracy on new", "ceiling.models.xgb.tests.new.accuracy")
+    return out
 
 
 def _summary(r: dict) -> str:

@@ -72,8 +72,12 @@ def test_rerun_resumes_from_cached_stages(quick_study, tmp_path):
     second = json.loads((out / "results.json").read_text())
     assert "cnn_tsaug" not in second["resumed_stages"]
     assert {"data", "calibrate_HELI", "sweep_published", "cnn_sigma_p"} <= set(second["resumed_stages"])
-    # recomputed with the same seed: the same metrics
-    assert second["strategies"]["tsaug"]["tests"] == first["strategies"]["tsaug"]["tests"]
+    # recomputed with the same seed: the same metrics (timings aside)
+    def metrics(r):
+        return {t: {k: v for k, v in m.items() if not k.endswith("seconds")}
+                for t, m in r["strategies"]["tsaug"]["tests"].items()}
+
+    assert metrics(second) == metrics(first)
 
 
 @pytest.mark.slow
