@@ -99,7 +99,7 @@ class StudyConfig:
         """Small sizes for a run of about a minute (tests, first look)."""
         p = dataclasses.replace(
             self.protocol, sigma_p=(0.0, 0.1, 0.2, 0.4), models=("nb", "xgb"), sweep_n_per_class=300,
-            cnn_n_per_class=1500, cnn_epochs=6, tsaug_n_per_class=300, tsaug_epochs=8, n_boot=300,
+            cnn_n_per_class=1000, cnn_epochs=15, tsaug_n_per_class=300, tsaug_epochs=15, n_boot=300,
             nuisances=("published", "uniform-phases"), calibration_max_steps=500, calibration_starts=1,
             calibration_fit_budget=600)
         s = dataclasses.replace(self.simulation, n_calibration=2, n_new={c: 24 for c in self.classes},

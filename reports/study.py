@@ -54,7 +54,16 @@ class Study:
             (self.out / sub).mkdir(exist_ok=True)
         self.log = log
         self.cache = StageCache(self.out, log)
-        self.key = settings_key(cfg.to_dict())
+        # each stage's cache key covers only what the stage depends on, so changing,
+        # say, the CNN's epochs does not redo the calibration
+        c, p = cfg.to_dict(), cfg.to_dict()["protocol"]
+        self.key = settings_key(c["seed"], c["classes"], c["data"], c["simulation"])  # the measured sets
+        self.calib_key = settings_key(self.key, c["quick"], {k: v for k, v in p.items() if k.startswith("calibration")})
+        self.sweep_key = settings_key(self.key, [p[k] for k in ("sigma_p", "models", "sweep_n_per_class",
+                                                                 "normalisation", "n_boot")])
+        self.cnn_key = settings_key(self.calib_key, [p[k] for k in ("cnn_n_per_class", "cnn_epochs", "cnn_patience",
+                                                                     "tsaug_n_per_class", "tsaug_epochs",
+                                                                     "normalisation", "n_boot")])
 
     # ---- stage 1: data -----------------------------------------------------
     def data(self) -> dict:
@@ -151,7 +160,7 @@ class Study:
             return {"posterior": str(nc), "corner": str(corner_png), "trace": str(trace_png),
                     "converged": bool(res.converged), "diagnostics": _jsonable(res.diagnostics),
                     "summary": _jsonable(res.summary()), "n_profiles": int(len(X))}
-        return self.cache.run(f"calibrate_{cls}", settings_key(self.key, cls), compute)
+        return self.cache.run(f"calibrate_{cls}", settings_key(self.calib_key, cls), compute)
 
     # ---- stage 3: sigma_P sweeps ---------------------------------------------
     def sweep(self, nuisance: str, tests: dict, executor) -> dict:
@@ -164,7 +173,7 @@ class Study:
                                  n_per_class=p.sweep_n_per_class,
                                  nuisance=dataclasses.asdict(NUISANCE_PRESETS[nuisance]),
                                  normalisation=p.normalisation)
-            make_train.cache_key = settings_key(self.key, nuisance)  # lets the sweep resume per sigma_P
+            make_train.cache_key = settings_key(self.sweep_key, nuisance)  # lets the sweep resume per sigma_P
             res = sigma_p_sweep(make_train, tests, sigma_ps=p.sigma_p, models=p.models, n_boot=p.n_boot,
                                 random_state=_seed(self.cfg, "sweep", nuisance), executor=executor,
                                 cache_dir=self.out / "stages" / f"sweep_{nuisance}", progress=False)
@@ -172,7 +181,7 @@ class Study:
             res.plot(png)
             res.to_csv(self.out / f"sweep_{nuisance}.csv")
             return {"rows": _jsonable(res.rows), "figure": str(png)}
-        return self.cache.run(f"sweep_{nuisance}", settings_key(self.key, nuisance), compute)
+        return self.cache.run(f"sweep_{nuisance}", settings_key(self.sweep_key, nuisance), compute)
 
     @staticmethod
     def choose_sigma(rows: list[dict], test_set: str) -> dict:
@@ -218,8 +227,10 @@ class Study:
         return out
 
     def cnn(self, job: dict) -> dict:
-        key = settings_key(self.key, job["name"], job.get("sigma_p"))
-        return self.cache.run(f"cnn_{job['name']}", key, lambda: _jsonable(jobs.train_and_test(job)))
+        return self.cache.run(f"cnn_{job['name']}", self._cnn_key(job), lambda: _jsonable(jobs.train_and_test(job)))
+
+    def _cnn_key(self, job: dict) -> str:
+        return settings_key(self.cnn_key, job["name"], job.get("sigma_p"))
 
     def profiles_figure(self, sigma_p: float, tests: dict, calib: dict) -> str:
         """Measured (new-drone) profiles beside the sigma_P and posterior training sets."""
@@ -245,7 +256,7 @@ class Study:
             measured_vs_synthetic({c: X[y == c] for c in self.cfg.classes}, synthetic, path,
                                   self.cfg.protocol.normalisation)
             return str(path)
-        return self.cache.run("profiles_figure", settings_key(self.key, sigma_p), compute)
+        return self.cache.run("profiles_figure", settings_key(self.calib_key, sigma_p), compute)
 
     # ---- stage 6: separability ceiling -----------------------------------------------
     def ceiling(self, tests: dict) -> dict:
@@ -270,7 +281,7 @@ class Study:
                                           random_state=0) for n, (Xt, yt) in tests.items()
                               if not n.startswith("old") and n != "mix"}}
             return result
-        return self.cache.run("ceiling", self.key, compute)
+        return self.cache.run("ceiling", settings_key(self.key, self.cfg.protocol.n_boot), compute)
 
     # ---- stage 7: generator speed against error --------------------------------------
     def speed(self) -> dict:
@@ -288,7 +299,7 @@ class Study:
                              "rate_per_s": len(x) / sec, "error": float(np.max(np.abs(prof - ref))),
                              "error_metric": "max |profile - float64|"})
             return {"rows": rows}
-        return self.cache.run("speed", self.key, compute)
+        return self.cache.run("speed", settings_key(self.cfg.quick), compute)
 
     # ---- the whole study -------------------------------------------------------------
     def run(self) -> dict:
@@ -310,8 +321,7 @@ class Study:
             todo = [j for j in cnn_jobs if not self._cached(f"cnn_{j['name']}", j)]
             if len(todo) > 1 and self.cfg.workers > 1:
                 for job, res in zip(todo, executor.map(jobs.train_and_test, todo)):
-                    key = settings_key(self.key, job["name"], job.get("sigma_p"))
-                    self.cache.run(f"cnn_{job['name']}", key, lambda r=res: _jsonable(r))
+                    self.cache.run(f"cnn_{job['name']}", self._cnn_key(job), lambda r=res: _jsonable(r))
             strategies = {j["name"]: self.cnn(j) for j in cnn_jobs}
             figure = self.profiles_figure(choice["non_peeking"]["sigma_p"], tests, calib)
             ceiling = self.ceiling(tests) if self.cfg.simulated else None
@@ -336,7 +346,7 @@ class Study:
         if not path.is_file():
             return False
         try:
-            return json.loads(path.read_text()).get("key") == settings_key(self.key, job["name"], job.get("sigma_p"))
+            return json.loads(path.read_text()).get("key") == self._cnn_key(job)
         except json.JSONDecodeError:
             return False
 

@@ -112,3 +112,18 @@ def test_interrupted_run_resumes_and_user_files_run_the_same_study(quick_study, 
     assert {"data", "calibrate_HELI", "calibrate_QUAD", "cnn_tsaug"} <= set(results["resumed_stages"])
     assert results["simulated"] is False and results["ceiling"] is None
     assert results["data"]["new"]["n"] == json.loads((quick_study / "results.json").read_text())["data"]["new"]["n"]
+
+
+def test_changing_the_cnn_keeps_calibration_and_sweeps(quick_study, tmp_path):
+    import dataclasses
+
+    from mdaug.reports.config import StudyConfig
+
+    out = tmp_path / "epochs"
+    shutil.copytree(quick_study, out)
+    cfg = StudyConfig(seed=3).quick_version()
+    cfg.protocol = dataclasses.replace(cfg.protocol, cnn_epochs=cfg.protocol.cnn_epochs + 1)
+    results = Study(cfg, out, log=lambda *_: None).run()
+    resumed = set(results["resumed_stages"])
+    assert {"data", "calibrate_HELI", "calibrate_QUAD", "sweep_published", "ceiling"} <= resumed
+    assert not {f"cnn_{s}" for s in results["strategies"]} & resumed
