@@ -30,7 +30,7 @@ def sigma_p_training_set(sigma_p: float, seed: int, *, classes, n_per_class: int
 
 
 def training_set(job: dict):
-    """(X, y, groups) for one CNN strategy: sigma_p, sigma_p_uniform, posterior or tsaug.
+    """(X, y, groups) for one CNN strategy: sigma_p, sigma_p_matched, posterior or tsaug.
 
     groups (tsaug only) is each copy's source profile, so that the CNN's validation
     split never holds a copy of a profile it trains on; None for model-based sets."""
@@ -85,5 +85,6 @@ def train_and_test(job: dict) -> dict:
                      random_state=job["seed"])
         m["predict_seconds"] = time.perf_counter() - t2
         tests[name] = m
-    return {"strategy": job["name"], "model": job["model"], "n_train": int(len(y)),
+    return {"strategy": job["name"], "model": job["model"], "n_train": int(len(y)), "sigma_p": job.get("sigma_p"),
+            "nuisance": job.get("nuisance"),
             "data_seconds": t_data, "train_seconds": t_train, "tests": tests}

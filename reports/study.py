@@ -31,12 +31,11 @@ import numpy as np
 
 from ..radar import atomic_savez, atomic_write, load_profiles
 from .cache import StageCache, settings_key
-from .config import NUISANCE_PRESETS, StudyConfig
+from .config import StudyConfig, nuisance_preset
 from .executor import make_executor
 from . import jobs
 
-STRATEGY_NUISANCE = {"sigma_p": "published", "sigma_p_uniform": "uniform-phases",
-                     "posterior": "uniform-phases", "tsaug": None}
+STRATEGY_NUISANCE = {"sigma_p": "published", "sigma_p_matched": "matched", "posterior": "matched", "tsaug": None}
 
 
 def _seed(cfg: StudyConfig, *keys) -> int:
@@ -59,11 +58,14 @@ class Study:
         c, p = cfg.to_dict(), cfg.to_dict()["protocol"]
         self.key = settings_key(c["seed"], c["classes"], c["data"], c["simulation"])  # the measured sets
         self.calib_key = settings_key(self.key, c["quick"], {k: v for k, v in p.items() if k.startswith("calibration")})
-        self.sweep_key = settings_key(self.key, [p[k] for k in ("sigma_p", "models", "sweep_n_per_class",
+        self.sweep_key = settings_key(self.key, [p[k] for k in ("sigma_p", "models", "sweep_n_per_class", "acquisition_ramps",
                                                                  "normalisation", "n_boot")])
-        self.cnn_key = settings_key(self.calib_key, [p[k] for k in ("cnn_n_per_class", "cnn_epochs", "cnn_patience",
+        self.cnn_key = settings_key(self.calib_key, [p[k] for k in ("cnn_n_per_class", "cnn_epochs", "cnn_patience", "acquisition_ramps",
                                                                      "tsaug_n_per_class", "tsaug_epochs",
                                                                      "normalisation", "n_boot")])
+
+    def nuisance(self, name: str):
+        return nuisance_preset(name, self.cfg.protocol.acquisition_ramps)
 
     # ---- stage 1: data -----------------------------------------------------
     def data(self) -> dict:
@@ -171,7 +173,7 @@ class Study:
         def compute():
             make_train = partial(jobs.sigma_p_training_set, classes=list(self.cfg.classes),
                                  n_per_class=p.sweep_n_per_class,
-                                 nuisance=dataclasses.asdict(NUISANCE_PRESETS[nuisance]),
+                                 nuisance=dataclasses.asdict(self.nuisance(nuisance)),
                                  normalisation=p.normalisation)
             make_train.cache_key = settings_key(self.sweep_key, nuisance)  # lets the sweep resume per sigma_P
             res = sigma_p_sweep(make_train, tests, sigma_ps=p.sigma_p, models=p.models, n_boot=p.n_boot,
@@ -196,7 +198,8 @@ class Study:
         return {"sigma_p": chosen, "test_set": test_set, "mean_accuracy": means}
 
     # ---- stage 5: CNN per strategy -----------------------------------------------
-    def cnn_jobs(self, sigma_p: float, tests: dict, calib: dict) -> list[dict]:
+    def cnn_jobs(self, sigma: dict[str, float], tests: dict, calib: dict) -> list[dict]:
+        """One job per CNN strategy; model-based ones at their nuisance's chosen sigma_P."""
         p = self.cfg.protocol
         # tsaug (as published) augments the measurements of the old drones: the
         # calibration profiles and the 'old' set; it is then tested only on sets that
@@ -219,8 +222,8 @@ class Study:
                            tests=unseen or tests)
             else:
                 job.update(strategy_kind="posterior" if name == "posterior" else "sigma_p",
-                           sigma_p=sigma_p, n_per_class=p.cnn_n_per_class,
-                           nuisance=dataclasses.asdict(NUISANCE_PRESETS[STRATEGY_NUISANCE[name]]),
+                           sigma_p=sigma[STRATEGY_NUISANCE[name]], n_per_class=p.cnn_n_per_class,
+                           nuisance=dataclasses.asdict(self.nuisance(STRATEGY_NUISANCE[name])),
                            posteriors={c: calib[c]["posterior"] for c in self.cfg.classes},
                            model_params={"epochs": p.cnn_epochs, "patience": p.cnn_patience})
             out.append(job)
@@ -232,7 +235,7 @@ class Study:
     def _cnn_key(self, job: dict) -> str:
         return settings_key(self.cnn_key, job["name"], job.get("sigma_p"))
 
-    def profiles_figure(self, sigma_p: float, tests: dict, calib: dict) -> str:
+    def profiles_figure(self, sigma: dict[str, float], tests: dict, calib: dict) -> str:
         """Measured (new-drone) profiles beside the sigma_P and posterior training sets."""
         from ..generator import SigmaPAugmenter
         from ..inference import PosteriorAugmenter
@@ -240,23 +243,24 @@ class Study:
 
         def compute():
             X, y = tests["new"] if "new" in tests else next(iter(tests.values()))
-            n, seed = 400, _seed(self.cfg, "figure")
-            nuisance = NUISANCE_PRESETS["uniform-phases"]
+            n, seed, matched = 400, _seed(self.cfg, "figure"), self.nuisance("matched")
+            sp, sm = sigma["published"], sigma["matched"]
             synthetic = {
-                f"sigma_P={sigma_p} (published nuisance)": {
-                    c: SigmaPAugmenter(c, sigma_p, random_state=seed).sample(n).profiles for c in self.cfg.classes},
-                f"sigma_P={sigma_p} (uniform phases)": {
-                    c: SigmaPAugmenter(c, sigma_p, nuisance=nuisance, random_state=seed).sample(n).profiles
+                f"sigma_P={sp} (published nuisance)": {
+                    c: SigmaPAugmenter(c, sp, random_state=seed).sample(n).profiles for c in self.cfg.classes},
+                f"sigma_P={sm} (matched nuisance)": {
+                    c: SigmaPAugmenter(c, sm, nuisance=matched, random_state=seed).sample(n).profiles
                     for c in self.cfg.classes},
-                "posterior (uniform phases)": {
-                    c: PosteriorAugmenter(calib[c]["posterior"], label=c, nuisance=nuisance,
+                "posterior (matched nuisance)": {
+                    c: PosteriorAugmenter(calib[c]["posterior"], label=c, nuisance=matched,
                                           random_state=seed).sample(n).profiles for c in self.cfg.classes},
             }
             path = self.out / "figures" / "profiles.png"
             measured_vs_synthetic({c: X[y == c] for c in self.cfg.classes}, synthetic, path,
                                   self.cfg.protocol.normalisation)
             return str(path)
-        return self.cache.run("profiles_figure", settings_key(self.calib_key, sigma_p), compute)
+        return self.cache.run("profiles_figure", settings_key(self.calib_key, sorted(sigma.items()),
+                                                              self.cfg.protocol.acquisition_ramps), compute)
 
     # ---- stage 6: separability ceiling -----------------------------------------------
     def ceiling(self, tests: dict) -> dict:
@@ -271,7 +275,7 @@ class Study:
             X = np.concatenate([c.profiles for c in parts])
             y = np.concatenate([c.labels for c in parts])
             result = {"n_train": int(len(y)), "models": {}}
-            for model in ("xgb", "nb"):
+            for model in ("svm", "xgb", "nb"):
                 clf = make_classifier(model, random_state=_seed(self.cfg, "ceiling", model))
                 t0 = time.perf_counter()
                 clf.fit(X, y)
@@ -310,20 +314,23 @@ class Study:
             tests = self.test_sets(index)
             calib = {c: self.calibrate(c) for c in self.cfg.classes}
             sweeps = {n: self.sweep(n, tests, executor) for n in self.cfg.protocol.nuisances}
-            primary = sweeps.get("published") or next(iter(sweeps.values()))
             peek_set = "new" if "new" in tests else next(iter(tests))
             honest_set = "old" if "old" in tests else peek_set
-            choice = {"published_peeking": self.choose_sigma(primary["rows"], peek_set),
-                      "non_peeking": self.choose_sigma(primary["rows"], honest_set)}
-            self.log(f"sigma_P chosen: {choice['non_peeking']['sigma_p']} (non-peeking, on '{honest_set}'), "
-                     f"{choice['published_peeking']['sigma_p']} (published way, peeks at '{peek_set}')")
-            cnn_jobs = self.cnn_jobs(choice["non_peeking"]["sigma_p"], tests, calib)
+            by_nuisance = {n: {"published_peeking": self.choose_sigma(sw["rows"], peek_set),
+                               "non_peeking": self.choose_sigma(sw["rows"], honest_set)} for n, sw in sweeps.items()}
+            choice = {**by_nuisance.get("published", next(iter(by_nuisance.values()))), "by_nuisance": by_nuisance}
+            for n, c in by_nuisance.items():
+                self.log(f"sigma_P [{n}]: {c['non_peeking']['sigma_p']} non-peeking (on '{honest_set}'), "
+                         f"{c['published_peeking']['sigma_p']} the published way (peeks at '{peek_set}')")
+            sigma = {n: by_nuisance.get(n, choice)["non_peeking"]["sigma_p"]
+                     for n in set(STRATEGY_NUISANCE.values()) - {None}}
+            cnn_jobs = self.cnn_jobs(sigma, tests, calib)
             todo = [j for j in cnn_jobs if not self._cached(f"cnn_{j['name']}", j)]
             if len(todo) > 1 and self.cfg.workers > 1:
                 for job, res in zip(todo, executor.map(jobs.train_and_test, todo)):
                     self.cache.run(f"cnn_{job['name']}", self._cnn_key(job), lambda r=res: _jsonable(r))
             strategies = {j["name"]: self.cnn(j) for j in cnn_jobs}
-            figure = self.profiles_figure(choice["non_peeking"]["sigma_p"], tests, calib)
+            figure = self.profiles_figure(sigma, tests, calib)
             ceiling = self.ceiling(tests) if self.cfg.simulated else None
             speed = self.speed()
         finally:

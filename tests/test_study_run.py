@@ -46,7 +46,7 @@ def test_quick_study_writes_results_that_match_its_report(quick_study):
 
 def test_quick_study_compares_every_strategy_with_intervals(quick_study):
     results = json.loads((quick_study / "results.json").read_text())
-    assert set(results["strategies"]) == {"sigma_p", "sigma_p_uniform", "posterior", "tsaug"}
+    assert set(results["strategies"]) == {"sigma_p", "sigma_p_matched", "posterior", "tsaug"}
     for name, s in results["strategies"].items():
         m = s["tests"]["new"]
         assert 0 <= m["accuracy"] <= 1 and m["n"] == sum(results["data"]["new"]["per_class"].values())
@@ -58,6 +58,10 @@ def test_quick_study_compares_every_strategy_with_intervals(quick_study):
         assert {r["sigma_p"] for r in rows} == set(results["config"]["protocol"]["sigma_p"])
     assert results["sigma_p_choice"]["non_peeking"]["test_set"] == "old"
     assert results["sigma_p_choice"]["published_peeking"]["test_set"] == "new"
+    by = results["sigma_p_choice"]["by_nuisance"]
+    assert set(by) == set(results["config"]["protocol"]["nuisances"])
+    # each model-based CNN trained at its own nuisance treatment's non-peeking choice
+    assert results["strategies"]["sigma_p_matched"]["sigma_p"] == by["matched"]["non_peeking"]["sigma_p"]
     assert {"data", "calibrate_HELI", "calibrate_QUAD", "cnn_posterior"} <= set(results["timings"])
     assert results["ceiling"]["models"]["xgb"]["tests"]["new"]["accuracy"] >= 0
 
