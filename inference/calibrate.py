@@ -92,15 +92,25 @@ def run_calibration(post: LogPosterior, ref: ClassParams, settings: CalibrationS
     with threadpool_limits(settings.threads):
         start = layout.canonical(layout.z_from_physics(start_x))[0]
         fit = global_fit(post, settings, fit_ss, start=start)
-        n_walkers = max(settings.n_walkers or 3 * layout.dim, 2 * layout.dim + 2, 32)  # DE moves need > 2 dim
-        n_walkers += n_walkers % 2
-        p0, n_modes = start_walkers(post, fit, settings, n_walkers, np.random.default_rng(ball_ss))
         resume_key = {k: v for k, v in settings.to_dict().items() if k not in ("max_steps", "progress", "threads")}
+        if settings.sampler == "emcee":  # keep the fingerprint of existing checkpoints unchanged
+            resume_key = {k: v for k, v in resume_key.items() if k != "sampler" and not k.startswith("smc_")
+                          and k != "n_particles"}
         fp = fingerprint(post.data, text=json.dumps([ref.name, layout.E, layout.priors.to_dict(), resume_key,
                                                      str(ss.entropy), list(ss.spawn_key), radar.to_dict()],
                                                     default=str))
-        chain = run_sampler(post, p0, settings, seed=int(mc_ss.generate_state(1)[0]), backend_path=backend_path,
-                            fp=fp, phase_cols=layout.phase_cols)
+        smc = None
+        if settings.sampler == "smc":
+            from .tempering import calibrate_smc
+
+            chain, smc = calibrate_smc(post, settings, mc_ss, backend_path=backend_path, fp=fp)
+            n_modes = 0
+        else:
+            n_walkers = max(settings.n_walkers or 3 * layout.dim, 2 * layout.dim + 2, 32)  # DE needs > 2 dim
+            n_walkers += n_walkers % 2
+            p0, n_modes = start_walkers(post, fit, settings, n_walkers, np.random.default_rng(ball_ss))
+            chain = run_sampler(post, p0, settings, seed=int(mc_ss.generate_state(1)[0]),
+                                backend_path=backend_path, fp=fp, phase_cols=layout.phase_cols)
         theta = chain.draws()
         lp = chain.draws_log_prob()
         if len(theta) > MAX_DRAWS:
@@ -108,7 +118,7 @@ def run_calibration(post: LogPosterior, ref: ClassParams, settings: CalibrationS
             theta, lp = theta[keep], lp[keep]
         loglik = post.pointwise(theta)
     shifts = np.zeros(layout.M, int) if shifts is None else shifts
-    return build_result(ref, layout, post, fit, chain, theta, lp, loglik, settings, radar, shifts, n_modes)
+    return build_result(ref, layout, post, fit, chain, theta, lp, loglik, settings, radar, shifts, n_modes, smc)
 
 
 def start_walkers(post: LogPosterior, fit, settings, n_walkers: int, rng) -> tuple[np.ndarray, int]:
@@ -141,10 +151,15 @@ def start_walkers(post: LogPosterior, fit, settings, n_walkers: int, rng) -> tup
     return np.concatenate(groups), len(centres)
 
 
-def _diagnostics(layout: Layout, chain, fit, settings, n_modes: int) -> dict:
+def _diagnostics(layout: Layout, chain, fit, settings, n_modes: int, smc=None) -> dict:
     names = layout.z_names() + [f"ln_sigma@{m}" for m in range(layout.M)]
     tau, ess = chain.tau, chain.ess
-    return {
+    extra = {"sampler": "emcee"}
+    if smc is not None:
+        from .tempering import smc_diagnostics
+
+        extra = smc_diagnostics(smc)
+    return {**extra,
         "converged": bool(chain.converged), "reason": chain.reason,
         "tau": {n: float(t) for n, t in zip(names, tau)}, "ess": {n: float(v) for n, v in zip(names, ess)},
         "tau_max": float(tau.max()), "ess_min": float(ess.min()),
@@ -160,7 +175,7 @@ def _diagnostics(layout: Layout, chain, fit, settings, n_modes: int) -> dict:
 
 
 def build_result(ref, layout: Layout, post: LogPosterior, fit, chain, theta, lp, loglik, settings, radar,
-                 shifts, n_modes: int = 1) -> CalibrationResult:
+                 shifts, n_modes: int = 1, smc=None) -> CalibrationResult:
     """Pack draws, diagnostics and metadata into an InferenceData (see :mod:`.result`)."""
     import xarray as xr
 
@@ -192,7 +207,7 @@ def build_result(ref, layout: Layout, post: LogPosterior, fit, chain, theta, lp,
             "settings": settings.to_dict(), "priors": layout.priors.to_dict(), "radar": radar.to_dict(),
             "fit": fit.to_dict(), "best_fit": best_x[0, 0].tolist(), "z_names": layout.z_names(),
             "recentred_shifts": np.asarray(shifts).tolist(),
-            "diagnostics": _diagnostics(layout, chain, fit, settings, n_modes),
+            "diagnostics": _diagnostics(layout, chain, fit, settings, n_modes, smc),
             "noise_model": "Gaussian iid per bin on the normalised profile, sigma per measurement (log-uniform)"}
     idata.posterior.attrs["mdaug"] = json.dumps(meta)
     res = CalibrationResult(idata)

@@ -11,7 +11,9 @@ NetCDF layout (``.save`` / ``.load``):
 * ``sample_stats``: ``lp`` (log posterior);
 * ``log_likelihood``: ``y`` per bin (chain, draw, measurement, bin) for LOO/WAIC;
 * ``observed_data``: ``y`` the normalised measured profiles;
-* ``chain_trace``: the walkers' full path (every k-th step) for trace plots;
+* ``chain_trace``: the walkers' full path (every k-th step) for trace plots
+  (with ``sampler="smc"``: one "step", the final particles; the tempering history --
+  betas, ESS, acceptance, sweeps, log evidence -- is in the diagnostics);
 * ``posterior.attrs["mdaug"]``: JSON with the class, engine count, settings,
   priors, fit, convergence diagnostics (tau, ESS, acceptance, converged, reason).
 """
@@ -179,10 +181,16 @@ class CalibrationResult:
                  f"misfit {f['misfit']:.2f}, {f['n_agree']} start(s) agree, noise sigma "
                  f"{np.round(f['sigma'], 4).tolist()}"]
         lines += [f"  note: {n}" for n in f["notes"]]
-        lines.append(f"MCMC: {d['n_walkers']} walkers x {d['chain_steps']} steps ({d['seconds']:.1f} s), "
-                     f"max tau {d['tau_max']:.0f} steps, chain/tau {d['steps_over_tau']:.1f}, "
-                     f"min ESS {d['ess_min']:.0f}, acceptance {d['acceptance_mean']:.2f}, "
-                     f"burn {d['burn']}, thin {d['thin']}")
+        if d.get("sampler") == "smc":
+            lines.append(f"SMC: {d['smc_n_particles']} particles, {d['smc_stages']} tempering stages, "
+                         f"{d['smc_n_evals']} evaluations ({d['seconds']:.1f} s), ESS {d['ess_min']:.0f}, "
+                         f"last acceptance {d['acceptance_mean']:.2f}, distinct particles "
+                         f"{d['smc_unique_share']:.0%}, log evidence {d['smc_log_z']:.2f}")
+        else:
+            lines.append(f"MCMC: {d['n_walkers']} walkers x {d['chain_steps']} steps ({d['seconds']:.1f} s), "
+                         f"max tau {d['tau_max']:.0f} steps, chain/tau {d['steps_over_tau']:.1f}, "
+                         f"min ESS {d['ess_min']:.0f}, acceptance {d['acceptance_mean']:.2f}, "
+                         f"burn {d['burn']}, thin {d['thin']}")
         lines.append(("converged: " if self.converged else "WARNING: ") + d["reason"])
         if d.get("weak_engines"):
             lines.append(f"WARNING: engine(s) {d['weak_engines']} stay near their prior (too weak to identify)")

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 FIT_ALGORITHMS = ("GN_CRS2_LM", "GN_MLSL_LDS", "GN_DIRECT_L", "GN_ISRES", "GN_ESCH")
 LOCAL_ALGORITHMS = ("LN_BOBYQA", "LN_NELDERMEAD", "LN_SBPLX")
+SAMPLERS = ("emcee", "smc")
 
 
 @dataclass(frozen=True)
@@ -38,6 +39,17 @@ class CalibrationSettings:
     level sigma (log-uniform prior on [sigma_min, sigma_max], in normalised units).
     ``dtype``: precision of f(x) (float32 is ~2x faster, error ~1e-7 of the peak).
     ``threads``: BLAS/FFT threads (the calibrate verb pins them; 1 is the default).
+
+    Sampler: ``sampler`` ``"emcee"`` (default, the ensemble above) or ``"smc"``
+    (opt-in tempered sequential Monte Carlo from the prior, :mod:`.tempering`):
+    ``n_particles`` (0 = auto: max(500, 40 x dim)), reweighting to an ESS of
+    ``smc_ess`` x N per stage (0.9: slow tempering; at 0.5 the population collapsed
+    onto a wrong mode on HELI), a share ``smc_redraw`` of the rejuvenation proposals
+    redrawing one coordinate from its uniform prior range (jumps between distant
+    narrow modes), rejuvenation sweeps until a particle has moved with
+    probability ``smc_p_move`` (at most ``smc_max_sweeps`` per stage), at most
+    ``smc_max_stages`` stages. The emcee settings above are then unused (the fit
+    still runs, for the report and the best-fit vector).
     """
 
     fit_algorithm: str = "GN_CRS2_LM"
@@ -63,6 +75,13 @@ class CalibrationSettings:
     dtype: str = "float32"
     threads: int = 1
     progress: bool = False
+    sampler: str = "emcee"
+    n_particles: int = 0
+    smc_ess: float = 0.9
+    smc_redraw: float = 0.3
+    smc_p_move: float = 0.99
+    smc_max_sweeps: int = 40
+    smc_max_stages: int = 500
 
     def __post_init__(self) -> None:
         if self.fit_algorithm not in FIT_ALGORITHMS:
@@ -82,6 +101,14 @@ class CalibrationSettings:
             raise ValueError(f"need 0 < sigma_min < sigma_max, got {self.sigma_min}, {self.sigma_max}")
         if self.alignment not in ("tone", "peak"):
             raise ValueError(f"alignment must be 'tone' or 'peak', got {self.alignment!r}")
+        if self.sampler not in SAMPLERS:
+            raise ValueError(f"sampler must be one of {SAMPLERS}, got {self.sampler!r}")
+        if not (0 < self.smc_ess < 1 and 0 < self.smc_p_move < 1 and 0 <= self.smc_redraw < 1):
+            raise ValueError(f"smc_ess and smc_p_move must be in (0, 1) and smc_redraw in [0, 1), got "
+                             f"{self.smc_ess}, {self.smc_p_move}, {self.smc_redraw}")
+        if self.n_particles < 0 or self.n_particles == 1 or self.smc_max_sweeps < 2 or self.smc_max_stages < 1:
+            raise ValueError("CalibrationSettings: n_particles must be 0 (auto) or >= 2, smc_max_sweeps >= 2 "
+                             "and smc_max_stages >= 1")
         if self.dtype not in ("float32", "float64"):
             raise ValueError(f"dtype must be float32 or float64, got {self.dtype!r}")
 
