@@ -221,8 +221,10 @@ class Study:
                            model_params={"epochs": p.tsaug_epochs, "patience": p.cnn_patience},
                            tests=unseen or tests)
             else:
-                job.update(strategy_kind="posterior" if name == "posterior" else "sigma_p",
-                           sigma_p=sigma[STRATEGY_NUISANCE[name]], n_per_class=p.cnn_n_per_class,
+                kind = "posterior" if name == "posterior" else "sigma_p"
+                if kind == "sigma_p":
+                    job["sigma_p"] = sigma[STRATEGY_NUISANCE[name]]
+                job.update(strategy_kind=kind, n_per_class=p.cnn_n_per_class,
                            nuisance=dataclasses.asdict(self.nuisance(STRATEGY_NUISANCE[name])),
                            posteriors={c: calib[c]["posterior"] for c in self.cfg.classes},
                            model_params={"epochs": p.cnn_epochs, "patience": p.cnn_patience})
