@@ -30,28 +30,42 @@ class StageCache:
     def path(self, name: str, suffix: str = ".json") -> Path:
         return self.folder / f"{name}{suffix}"
 
+    def _stored(self, name: str, key: str) -> dict | None:
+        path = self.path(name)
+        if not path.is_file():
+            return None
+        try:
+            stored = json.loads(path.read_text())
+        except json.JSONDecodeError:
+            return None
+        return stored if stored.get("key") == key else None
+
+    def has(self, name: str, key: str) -> bool:
+        """Whether stage ``name`` is cached for ``key``."""
+        return self._stored(name, key) is not None
+
+    def store(self, name: str, key: str, result, seconds: float):
+        """Record a stage computed elsewhere (e.g. by a worker) with its wall time."""
+        self.timings[name] = seconds
+        text = json.dumps({"key": key, "seconds": seconds, "result": result}, indent=1)
+        atomic_write(self.path(name), lambda fh: fh.write(text.encode()))
+        return result
+
     def run(self, name: str, key: str, compute):
         """Return the cached result of stage ``name`` for ``key``, or compute and store it.
 
         ``compute()`` returns a JSON-serialisable dict; its wall time is recorded.
         """
-        path = self.path(name)
-        if path.is_file():
-            try:
-                stored = json.loads(path.read_text())
-            except json.JSONDecodeError:
-                stored = {}
-            if stored.get("key") == key:
-                self.timings[name] = stored["seconds"]
-                self.resumed.append(name)
-                self.log(f"[{name}] cached ({stored['seconds']:.1f} s when computed)")
-                return stored["result"]
+        stored = self._stored(name, key)
+        if stored is not None:
+            self.timings[name] = stored["seconds"]
+            self.resumed.append(name)
+            self.log(f"[{name}] cached ({stored['seconds']:.1f} s when computed)")
+            return stored["result"]
         self.log(f"[{name}] running ...")
         t0 = time.perf_counter()
         result = compute()
         seconds = time.perf_counter() - t0
-        self.timings[name] = seconds
-        text = json.dumps({"key": key, "seconds": seconds, "result": result}, indent=1)
-        atomic_write(path, lambda fh: fh.write(text.encode()))
+        self.store(name, key, result, seconds)
         self.log(f"[{name}] done in {seconds:.1f} s")
         return result

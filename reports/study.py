@@ -327,10 +327,11 @@ class Study:
             sigma = {n: by_nuisance.get(n, choice)["non_peeking"]["sigma_p"]
                      for n in set(STRATEGY_NUISANCE.values()) - {None}}
             cnn_jobs = self.cnn_jobs(sigma, tests, calib)
-            todo = [j for j in cnn_jobs if not self._cached(f"cnn_{j['name']}", j)]
+            todo = [j for j in cnn_jobs if not self.cache.has(f"cnn_{j['name']}", self._cnn_key(j))]
             if len(todo) > 1 and self.cfg.workers > 1:
                 for job, res in zip(todo, executor.map(jobs.train_and_test, todo)):
-                    self.cache.run(f"cnn_{job['name']}", self._cnn_key(job), lambda r=res: _jsonable(r))
+                    self.cache.store(f"cnn_{job['name']}", self._cnn_key(job), _jsonable(res),
+                                     res["data_seconds"] + res["train_seconds"])
             strategies = {j["name"]: self.cnn(j) for j in cnn_jobs}
             figure = self.profiles_figure(sigma, tests, calib)
             ceiling = self.ceiling(tests) if self.cfg.simulated else None
@@ -349,16 +350,6 @@ class Study:
 
         write_report(results, self.out / "report.html")
         return results
-
-    def _cached(self, name: str, job: dict) -> bool:
-        path = self.cache.path(name)
-        if not path.is_file():
-            return False
-        try:
-            return json.loads(path.read_text()).get("key") == self._cnn_key(job)
-        except json.JSONDecodeError:
-            return False
-
 
 def _jsonable(obj):
     """Plain Python types for JSON (numpy scalars and arrays converted)."""

@@ -131,3 +131,19 @@ def test_changing_the_cnn_keeps_calibration_and_sweeps(quick_study, tmp_path):
     resumed = set(results["resumed_stages"])
     assert {"data", "calibrate_HELI", "calibrate_QUAD", "sweep_published", "ceiling"} <= resumed
     assert not {f"cnn_{s}" for s in results["strategies"]} & resumed
+
+
+@pytest.mark.slow
+def test_worker_processes_give_the_serial_results(quick_study, tmp_path):
+    out = tmp_path / "workers"
+    assert main(["run", "--quick", "--workers", "2", "--out", str(out), "--seed", "3"]) == 0
+    serial = json.loads((quick_study / "results.json").read_text())
+    parallel = json.loads((out / "results.json").read_text())
+
+    def metrics(r):
+        return {name: {t: {k: v for k, v in m.items() if not k.endswith("seconds")} for t, m in s["tests"].items()}
+                for name, s in r["strategies"].items()}
+
+    assert metrics(parallel) == metrics(serial)
+    assert [row["accuracy"] for row in parallel["sweeps"]["published"]["rows"]] == \
+        [row["accuracy"] for row in serial["sweeps"]["published"]["rows"]]
