@@ -10,6 +10,8 @@ import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from ..generator.commands import csv_list  # CLI glue: the only place classify uses the generator
+
 MODELS = ("svm", "nb", "xgb", "cnn")
 
 
@@ -18,10 +20,6 @@ def _floats(text: str) -> list[float]:
         return [float(t) for t in text.split(",") if t.strip()]
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
-
-
-def _names(text: str) -> list[str]:
-    return [t.strip() for t in text.split(",") if t.strip()]
 
 
 def _model_params(args, name: str) -> dict:
@@ -78,13 +76,11 @@ def run_train(args) -> int:
 
 
 def run_evaluate(args) -> int:
-    from ..radar import atomic_write, check_writable
+    from ..radar import atomic_write, check_outputs
     from .metrics import evaluate, format_metrics, plot_confusion
     from .persist import load_model
 
-    for path in (args.json, args.plot):
-        if path is not None:
-            check_writable(path)
+    check_outputs(args.json, args.plot)
     model = load_model(args.model)
     test = _load_set(args.test, "test data")
     x = model.check_input(test.profiles, source=str(args.test))
@@ -196,14 +192,12 @@ def run_sweep(args) -> int:
 
 
 def run_baseline(args) -> int:
-    from ..radar import atomic_write, check_writable
+    from ..radar import atomic_write, check_outputs
     from .metrics import evaluate, format_metrics
     from .persist import save_model
     from .tsaug_baseline import tsaug_baseline, tsaug_cross_validate
 
-    for path in (args.out, args.json):
-        if path is not None:
-            check_writable(path)
+    check_outputs(args.out, args.json)
     if args.folds is None and args.out is None:
         raise ValueError("give --out MODEL (train on all of DATA) or --folds K (cross-validate on DATA)")
     data = _load_set(args.data, "measured profiles")
@@ -262,7 +256,7 @@ def register(sub) -> None:
                                    "and/or by k-fold cross-validation on DATA (--folds).")
     p.add_argument("data", type=Path, help="measured training profiles (NPZ, CSV or .mat)")
     p.add_argument("--out", type=Path, default=None, help="model file to write")
-    p.add_argument("--test", type=_names, default=None, help="comma-separated test files (with --out)")
+    p.add_argument("--test", type=csv_list, default=None, help="comma-separated test files (with --out)")
     p.add_argument("--folds", type=int, default=None, help="k-fold cross-validation on DATA")
     p.add_argument("--n-per-class", type=int, default=16000, help="augmented profiles per class (default 16000)")
     p.add_argument("--json", type=Path, default=None, help="write the metrics as JSON")
@@ -280,10 +274,10 @@ def register(sub) -> None:
                                    "interrupted run from --out/jobs.")
     p.add_argument("--sigma-p", type=_floats, default=list(PUBLISHED_SIGMA_PS),
                    help="comma-separated sigma_P grid (default the published 10 values)")
-    p.add_argument("--models", type=_names, default=list(FAST_MODELS), help="default svm,nb,xgb")
-    p.add_argument("--test", type=_names, required=True, help="comma-separated test files (e.g. old.npz,new.npz)")
+    p.add_argument("--models", type=csv_list, default=list(FAST_MODELS), help="default svm,nb,xgb")
+    p.add_argument("--test", type=csv_list, required=True, help="comma-separated test files (e.g. old.npz,new.npz)")
     p.add_argument("--out", type=Path, required=True, help="output folder")
-    p.add_argument("--classes", type=_names, default=["HELI", "QUAD"], help="class references (default HELI,QUAD)")
+    p.add_argument("--classes", type=csv_list, default=["HELI", "QUAD"], help="class references (default HELI,QUAD)")
     p.add_argument("--n-per-class", type=int, default=4000,
                    help="synthetic profiles per class and sigma_P (default 4000; the paper used 16000)")
     p.add_argument("--sign-policy", choices=SIGN_POLICIES, default="reflect")

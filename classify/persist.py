@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import __version__
 from ..radar import DataFileError, atomic_write
 from .base import ProfileClassifier
 from .models import classifier_class
@@ -31,15 +32,6 @@ from .models import classifier_class
 FORMAT = "mdaug-classifier"
 FORMAT_VERSION = 1
 SKOPS_TRUSTED = ("sklearn.calibration._CalibratedClassifier", "sklearn.calibration._SigmoidCalibration")
-
-
-def _package_version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("mdaug")
-    except PackageNotFoundError:
-        return "unknown"
 
 
 def _weights(model: ProfileClassifier) -> tuple[str, bytes]:
@@ -68,7 +60,7 @@ def save_model(model: ProfileClassifier, path) -> Path:
             "params": model.params(), "classes": model.classes_.tolist(),
             "n_features": model.n_features_in_, "normalisation": model.normalisation,
             "weights": member, "train_seconds": model.train_seconds_,
-            "package_version": _package_version()}
+            "package_version": __version__}
     if model.name == "cnn":
         meta.update(history=model.history_, split_scores=model.split_scores_, best_epoch=model.best_epoch_)
 

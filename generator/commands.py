@@ -58,14 +58,12 @@ def write_augmented(args, augmenters, extra_settings=None) -> int:
     """Make, save and (optionally) plot a dataset; print one summary line."""
     import time
 
-    from ..radar.io import atomic_write, check_writable
+    from ..radar.io import atomic_write, check_outputs
     from .dataset import make_dataset, save_dataset
 
     if args.n_per_class <= 0:
         raise ValueError(f"--n-per-class must be a positive integer, got {args.n_per_class}")
-    for path in (args.out, args.plot):
-        if path is not None:
-            check_writable(path)
+    check_outputs(args.out, args.plot)
     t0 = time.perf_counter()
     ds = make_dataset(augmenters, args.n_per_class, args.seed, extra_settings=extra_settings)
     save_dataset(args.out, ds)

@@ -18,17 +18,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import __version__
 from ..radar import DataFileError, ProfileSet, atomic_savez, load_profiles
 from .augment import ModelAugmenter
-
-
-def package_version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("mdaug")
-    except PackageNotFoundError:
-        return "unknown"
 
 
 @dataclass
@@ -61,7 +53,7 @@ def make_dataset(augmenters: list[ModelAugmenter], n_per_class: int, seed: int,
     radar = augmenters[0].radar
     settings = {
         "seed": seed, "n_per_class": n_per_class, "classes": labels,
-        "radar": radar.to_dict(), "package_version": package_version(), "simulated": True,
+        "radar": radar.to_dict(), "package_version": __version__, "simulated": True,
         "per_class": {a.label: a.settings() for a in augmenters},
         **(extra_settings or {}),
     }

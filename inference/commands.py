@@ -34,13 +34,11 @@ def posterior_arg(text: str) -> tuple[str, Path]:
 
 def run_calibrate(args) -> int:
     from ..radar import load_profiles
-    from ..radar.io import check_writable
+    from ..radar.io import check_outputs
     from .calibrate import calibrate
     from .settings import CalibrationSettings
 
-    for path in (args.out, args.corner, args.trace):
-        if path is not None:
-            check_writable(path)
+    check_outputs(args.out, args.corner, args.trace)
     data = load_profiles(args.measured)
     profiles = data.select(args.class_name.upper() if args.class_name.upper() in data.classes else args.class_name)
     base = CalibrationSettings.quick() if args.quick else CalibrationSettings()

@@ -75,6 +75,13 @@ def check_writable(path) -> Path:
     return path
 
 
+def check_outputs(*paths) -> None:
+    """:func:`check_writable` on every given output path (None = not asked for)."""
+    for path in paths:
+        if path is not None:
+            check_writable(path)
+
+
 def atomic_write(path, write) -> Path:
     """Call ``write(fileobj)`` on a temporary file beside ``path``, then rename it.
 
