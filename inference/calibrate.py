@@ -103,7 +103,7 @@ def run_calibration(post: LogPosterior, ref: ClassParams, settings: CalibrationS
         if settings.sampler == "smc":
             from .tempering import calibrate_smc
 
-            chain, smc = calibrate_smc(post, settings, mc_ss, backend_path=backend_path, fp=fp)
+            chain, smc = calibrate_smc(post, settings, mc_ss, backend_path=backend_path, fp=fp, fit=fit)
             n_modes = 0
         else:
             n_walkers = max(settings.n_walkers or 3 * layout.dim, 2 * layout.dim + 2, 32)  # DE needs > 2 dim

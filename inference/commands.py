@@ -44,7 +44,8 @@ def run_calibrate(args) -> int:
     base = CalibrationSettings.quick() if args.quick else CalibrationSettings()
     overrides = {k: v for k, v in {"max_steps": args.max_steps, "fit_budget": args.fit_budget,
                                    "n_starts": args.starts, "n_walkers": args.walkers,
-                                   "fit_algorithm": args.fit_algorithm, "normalisation": args.normalisation}.items()
+                                   "fit_algorithm": args.fit_algorithm, "normalisation": args.normalisation,
+                                   "sampler": args.sampler, "n_particles": args.particles}.items()
                  if v is not None}
     settings = base.replace(threads=args.threads, progress=args.progress, range_offset=not args.no_range_offset,
                             **overrides)
@@ -96,8 +97,9 @@ def run_augment_posterior(args) -> int:
 def register(sub) -> None:
     p = sub.add_parser("calibrate", help="calibrate a class from measured profiles (fit + MCMC posterior)",
                        description="Fit the class's parameter vector to measured profiles (nlopt, several starts) "
-                                   "and sample its posterior (emcee, until 50 autocorrelation times). Exit status "
-                                   "3 when the chain did not converge (output written, flagged).")
+                                   "and sample its posterior (emcee until 50 autocorrelation times, or tempered SMC "
+                                   "with --sampler smc). Exit status 3 when the sampler did not converge (output "
+                                   "written, flagged).")
     p.add_argument("measured", type=Path, help="measured profiles (NPZ/CSV/.mat with profiles and labels)")
     p.add_argument("--class", dest="class_name", required=True, help="class label to calibrate (e.g. HELI)")
     p.add_argument("--engines", type=engines_arg, default=None, help="1, 4, ... or auto (default: the reference's)")
@@ -112,6 +114,10 @@ def register(sub) -> None:
     p.add_argument("--fit-budget", type=int, default=None, help="objective evaluations per global start")
     p.add_argument("--starts", type=int, default=None, help="global fit starts")
     p.add_argument("--walkers", type=int, default=None)
+    p.add_argument("--sampler", choices=("emcee", "smc"), default=None,
+                   help="emcee (default: ensemble from the fit, 50 tau) or smc (tempered SMC from the prior with "
+                        "mode jumps: for multimodal posteriors, gives the evidence)")
+    p.add_argument("--particles", type=int, default=None, help="SMC particles (default max(500, 40 x dim))")
     p.add_argument("--fit-algorithm", default=None, help="nlopt global algorithm (default GN_CRS2_LM)")
     p.add_argument("--normalisation", default=None, choices=("peak", "db", "l2", "none"))
     p.add_argument("--no-range-offset", action="store_true", help="do not fit a sub-bin range offset")

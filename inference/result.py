@@ -141,7 +141,7 @@ class CalibrationResult:
                 v = self._var(name)[:, k]
                 if name == "Gamma":
                     if k == 0:
-                        rows[f"Gamma[0]"] = dict(mean=float(v[0]), sd=0.0, q05=float(v[0]), q95=float(v[0]),
+                        rows["Gamma[0]"] = dict(mean=float(v[0]), sd=0.0, q05=float(v[0]), q95=float(v[0]),
                                                  prior_sd=np.nan, sd_ratio=np.nan, identified=False, kind="fixed")
                         continue
                     lo, hi = b["lnG"]
@@ -185,7 +185,8 @@ class CalibrationResult:
             lines.append(f"SMC: {d['smc_n_particles']} particles, {d['smc_stages']} tempering stages, "
                          f"{d['smc_n_evals']} evaluations ({d['seconds']:.1f} s), ESS {d['ess_min']:.0f}, "
                          f"last acceptance {d['acceptance_mean']:.2f}, distinct particles "
-                         f"{d['smc_unique_share']:.0%}, log evidence {d['smc_log_z']:.2f}")
+                         f"{d['smc_unique_share']:.0%}, log evidence {d['smc_log_z']:.2f}, modes known to the "
+                         f"jumps {d.get('smc_modes', 0)}")
         else:
             lines.append(f"MCMC: {d['n_walkers']} walkers x {d['chain_steps']} steps ({d['seconds']:.1f} s), "
                          f"max tau {d['tau_max']:.0f} steps, chain/tau {d['steps_over_tau']:.1f}, "

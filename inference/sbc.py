@@ -4,7 +4,9 @@ For each replicate: draw theta from the prior, simulate data exactly as the
 likelihood assumes (model profile + Gaussian noise of the drawn sigma), run the
 fit + MCMC, and record the rank of the true value among ``n_rank`` posterior draws
 for every test quantity (shared parameters, ln sigma, range offset, and cos / sin of
-every phase: ranks need an ordering, which a circle lacks). When the pipeline
+every phase: ranks need an ordering, which a circle lacks), and of the log
+posterior itself (the data-dependent quantity Modrak et al. 2023 recommend: it
+ranks high when the sampler misses a mode the truth sits in). When the pipeline
 samples the true posterior the ranks are uniform on 0..n_rank; the statistic is a
 chi-square test of uniformity over ``n_bins`` rank bins per quantity (p-values),
 plus the pooled chi-square over all quantities.
@@ -66,6 +68,11 @@ def run_sbc(reference: ClassParams | str = "HELI", n_replicates: int = 20, *,
         pick = np.linspace(0, len(draws_theta) - 1, n_rank).round().astype(int)
         q_true, names = sbc_quantities(layout, truth)
         q_draw, _ = sbc_quantities(layout, draws_theta[pick])
+        # the log posterior as one more test quantity: a sampler that misses a mode
+        # holding the truth ranks the truth's log posterior above its draws'
+        q_true = np.append(q_true, post(truth))
+        q_draw = np.column_stack([q_draw, post(draws_theta[pick])])
+        names = names + ["log posterior"]
         ranks.append(np.sum(q_draw < q_true, axis=0))
         converged.append(res.converged)
         if progress:

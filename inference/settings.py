@@ -82,6 +82,8 @@ class CalibrationSettings:
     smc_p_move: float = 0.99
     smc_max_sweeps: int = 40
     smc_max_stages: int = 500
+    smc_jump: float = 0.1
+    smc_polish: int = 8
 
     def __post_init__(self) -> None:
         if self.fit_algorithm not in FIT_ALGORITHMS:
@@ -103,6 +105,9 @@ class CalibrationSettings:
             raise ValueError(f"alignment must be 'tone' or 'peak', got {self.alignment!r}")
         if self.sampler not in SAMPLERS:
             raise ValueError(f"sampler must be one of {SAMPLERS}, got {self.sampler!r}")
+        if not (0 <= self.smc_jump < 1 and self.smc_redraw + self.smc_jump < 1 and self.smc_polish >= 0):
+            raise ValueError(f"smc_jump must be in [0, 1) with smc_redraw + smc_jump < 1 and smc_polish >= 0, "
+                             f"got {self.smc_jump}, {self.smc_redraw}, {self.smc_polish}")
         if not (0 < self.smc_ess < 1 and 0 < self.smc_p_move < 1 and 0 <= self.smc_redraw < 1):
             raise ValueError(f"smc_ess and smc_p_move must be in (0, 1) and smc_redraw in [0, 1), got "
                              f"{self.smc_ess}, {self.smc_p_move}, {self.smc_redraw}")
@@ -115,9 +120,10 @@ class CalibrationSettings:
     @classmethod
     def quick(cls, **kw) -> "CalibrationSettings":
         """A few-second HELI run for tests and ``--quick``: small fit budget, short
-        chain. It will usually end before 50 tau and say so (converged=False)."""
+        chain, 3 particles polished per mode search. It will usually end before
+        50 tau and say so (converged=False)."""
         base = dict(n_starts=2, fit_budget=1000, polish_budget=2000, max_steps=1000, check_every=250,
-                    n_walkers=32)
+                    n_walkers=32, smc_polish=3)
         base.update(kw)
         return cls(**base)
 

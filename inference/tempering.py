@@ -23,7 +23,13 @@ p_beta(theta) ~ prior(theta) x L(theta)^beta:
    (a spectral line pays off only within ~1 bin of its place), and a redraw puts a
    particle's line at a distant place in one step.
    Sweeps run until each particle has moved with probability ``p_move`` under the
-   observed acceptance (at least ``min_sweeps``, at most ``max_sweeps``).
+   observed acceptance (at least ``min_sweeps``, at most ``max_sweeps``);
+4. mode jumps (calibration default, :mod:`.modes`): a share of the proposals are
+   independence draws from a Student-t mixture over the optima found so far (the
+   fit's starts, and particles polished at a few tempering levels). HELI modes
+   differ in several coordinates at once (a line's frequency, amplitude and phase
+   and the tone offset together), which neither DE nor single-coordinate moves
+   cross; a mode no particle reached early stayed empty without them.
 
 Mode weights come from the reweighting (which needs no mixing between modes), not
 from walkers having to cross between modes, and the whole population is one
@@ -55,7 +61,8 @@ class SMCResult:
     """particles (N, dim) equally weighted at beta = 1; log_lik (N,); log_z (evidence,
     nats, including the prior's normalisation); betas (stages + 1,); ess (stages,)
     weight ESS at each reweighting; acceptance (stages,) and sweeps (stages,) of the
-    rejuvenations; converged; reason; seconds; resumed_at (stage); n_evals."""
+    rejuvenations; converged; reason; seconds; resumed_at (stage); n_evals (including
+    the mode search's); n_modes: optima known to the mode jumps at the end."""
 
     particles: np.ndarray
     log_lik: np.ndarray
@@ -70,6 +77,7 @@ class SMCResult:
     resumed_at: int = 0
     n_evals: int = 0
     log_prior: np.ndarray | None = None
+    n_modes: int = 0
 
 
 def next_beta(log_lik: np.ndarray, beta: float, target_ess: float) -> float:
@@ -100,13 +108,18 @@ def systematic_resample(w: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.minimum(np.searchsorted(np.cumsum(w), u), n - 1)
 
 
-def de_sweep(theta, ll, lprior, beta, target, rng, phase_cols=(), bounds=None, p_redraw: float = 0.0):
+def de_sweep(theta, ll, lprior, beta, target, rng, phase_cols=(), bounds=None, p_redraw: float = 0.0,
+             mixture=None, p_jump: float = 0.0):
     """One sweep: the two halves of the population move in turn by Metropolis steps
     under prior x L^beta. target: theta (n, dim) -> (log prior (n,), log lik (n,)).
     Proposals: DE translations; with probability ``p_redraw`` (needs ``bounds`` =
     (lo, hi) arrays (dim,)) instead one random coordinate redrawn uniformly on
     [lo, hi] (symmetric: the uniform density does not depend on the current value),
     which lets a particle jump straight to a distant narrow mode of that coordinate.
+    With probability ``p_jump`` (needs ``mixture``, a :class:`.modes.ModeMixture`)
+    instead an independence proposal from the mixture over known modes, accepted
+    with the ratio that includes q(old) / q(new). Every particle picks its kernel
+    independently of its state, so the sweep is a mixture of valid kernels.
     Returns (theta, ll, lprior, acceptance share); arrays are updated copies."""
     theta, ll, lprior = theta.copy(), ll.copy(), lprior.copy()
     n, dim = theta.shape
@@ -133,11 +146,17 @@ def de_sweep(theta, ll, lprior, beta, target, rng, phase_cols=(), bounds=None, p
             c = rng.integers(dim, size=redraw.size)
             prop[redraw] = theta[move[redraw]]
             prop[redraw, c] = rng.uniform(bounds[0][c], bounds[1][c])
+        jump = np.zeros(m, bool)
+        if mixture is not None and p_jump > 0:
+            jump = rng.uniform(size=m) < p_jump
+            prop[jump] = mixture.sample(int(jump.sum()), rng)
         if cols.size:
             prop[:, cols] = wrap(prop[:, cols])
         lp_new, ll_new = target(prop)
         with np.errstate(invalid="ignore"):
             log_a = (lp_new + beta * np.where(np.isfinite(lp_new), ll_new, 0.0)) - (lprior[move] + beta * ll[move])
+            if jump.any():
+                log_a[jump] += mixture.logpdf(theta[move[jump]]) - mixture.logpdf(prop[jump])
         acc = np.log(rng.uniform(size=m)) < np.where(np.isfinite(log_a), log_a, -np.inf)
         idx = move[acc]
         theta[idx], ll[idx], lprior[idx] = prop[acc], ll_new[acc], lp_new[acc]
@@ -173,7 +192,8 @@ def _save_checkpoint(path: Path, fp: str, rng, **arrays) -> None:
 
 def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float = 0.5, p_move: float = 0.99,
             min_sweeps: int = 2, max_sweeps: int = 40, max_stages: int = 500, min_acceptance: float = 0.02,
-            phase_cols=(), bounds=None, p_redraw: float = 0.0, backend_path=None, fp: str = "") -> SMCResult:
+            phase_cols=(), bounds=None, p_redraw: float = 0.0, modes=None, p_jump: float = 0.0,
+            backend_path=None, fp: str = "") -> SMCResult:
     """Adaptive tempered SMC from the prior to the posterior (see the module docstring).
 
     target: theta (n, dim) -> (log prior (n,), log likelihood (n,)), vectorised;
@@ -184,8 +204,12 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
     from the acceptance); min_acceptance: a final rejuvenation accepting less is
     flagged not converged. bounds, p_redraw: uniform single-coordinate redraws (see
     :func:`de_sweep`; the prior must be uniform on [lo, hi] in each coordinate for
-    them to be efficient, they are valid for any prior). backend_path: npz
-    checkpoint (resumable, see above).
+    them to be efficient, they are valid for any prior). modes: a mode finder
+    (:class:`.modes.ModeFinder` or any object with ``update(theta, beta, rng) ->
+    evaluations``, ``mixture(beta, rng)``, ``state()`` and ``load(state)``) asked
+    before every rejuvenation to look for new optima and for the mode mixture that
+    ``p_jump`` of the proposals are drawn from (see :func:`de_sweep`).
+    backend_path: npz checkpoint (resumable, see above).
     """
     t0 = time.perf_counter()
     path = None if backend_path is None else Path(backend_path)
@@ -198,6 +222,8 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
         ess_h, acc_h, sw_h = list(state["ess"]), list(state["acceptance"]), list(state["sweeps"])
         n_evals = int(state["n_evals"])
         resumed_at = len(betas) - 1
+        if modes is not None:
+            modes.load({k[6:]: v for k, v in state.items() if k.startswith("modes_")})
     else:
         theta = np.asarray(sample_prior(n_particles, rng), float)
         lprior, ll = target(theta)
@@ -216,9 +242,14 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
         ess_h.append(1.0 / np.sum(w * w))
         idx = systematic_resample(w, rng)
         theta, ll, lprior = theta[idx], ll[idx], lprior[idx]
+        mixture = None
+        if modes is not None:
+            n_evals += modes.update(theta, b, rng)
+            mixture = modes.mixture(b, rng)
         acc_sum, sweeps, need = 0.0, 0, min_sweeps
         while sweeps < need:
-            theta, ll, lprior, a = de_sweep(theta, ll, lprior, b, target, rng, phase_cols, bounds, p_redraw)
+            theta, ll, lprior, a = de_sweep(theta, ll, lprior, b, target, rng, phase_cols, bounds, p_redraw,
+                                            mixture, p_jump)
             n_evals += n
             sweeps += 1
             acc_sum += a
@@ -228,8 +259,9 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
         acc_h.append(acc_sum / sweeps)
         sw_h.append(sweeps)
         if path is not None:
+            extra = {} if modes is None else {f"modes_{k}": v for k, v in modes.state().items()}
             _save_checkpoint(path, fp, rng, theta=theta, ll=ll, lprior=lprior, betas=betas, log_z=log_z,
-                             ess=ess_h, acceptance=acc_h, sweeps=sw_h, n_evals=n_evals)
+                             ess=ess_h, acceptance=acc_h, sweeps=sw_h, n_evals=n_evals, **extra)
     stages = len(betas) - 1
     if betas[-1] < 1.0:
         converged, reason = False, (f"NOT CONVERGED: SMC stage budget of {max_stages} ended at beta "
@@ -244,7 +276,7 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
     return SMCResult(particles=theta, log_lik=ll, log_z=float(log_z), betas=np.array(betas), ess=np.array(ess_h),
                      acceptance=np.array(acc_h), sweeps=np.array(sw_h, int), converged=converged, reason=reason,
                      seconds=time.perf_counter() - t0, resumed_at=resumed_at, n_evals=n_evals,
-                     log_prior=lprior)
+                     log_prior=lprior, n_modes=0 if modes is None else len(modes.state().get("means", ())))
 
 
 def posterior_target(post):
@@ -259,7 +291,7 @@ def posterior_target(post):
     return target
 
 
-def calibrate_smc(post, settings, seed, backend_path=None, fp: str = ""):
+def calibrate_smc(post, settings, seed, backend_path=None, fp: str = "", fit=None):
     """Run :func:`run_smc` on a LogPosterior with the calibration settings; returns
     (ChainResult with the N particles as one stored step, SMCResult).
 
@@ -276,11 +308,20 @@ def calibrate_smc(post, settings, seed, backend_path=None, fp: str = ""):
     sigma = (settings.sigma_min, settings.sigma_max)
     lo, hi = layout.z_bounds()
     bounds = (np.r_[lo, np.full(layout.M, np.log(sigma[0]))], np.r_[hi, np.full(layout.M, np.log(sigma[1]))])
+    modes = None
+    if settings.smc_jump > 0:
+        from .modes import ModeFinder
+
+        seeds = None
+        if fit is not None:
+            sig = np.sqrt(post.ssr(fit.starts_z) / post.n_bins)
+            seeds = layout.theta_from_z(fit.starts_z, np.log(np.clip(sig, sigma[0] * 1.001, sigma[1] * 0.999)))
+        modes = ModeFinder(post, n_polish=settings.smc_polish, seed_thetas=seeds)
     smc = run_smc(posterior_target(post), lambda k, rng: layout.sample_prior(k, rng, sigma), n, seed,
                   ess_target=settings.smc_ess, p_move=settings.smc_p_move, max_sweeps=settings.smc_max_sweeps,
                   max_stages=settings.smc_max_stages, phase_cols=layout.phase_cols, bounds=bounds,
-                  p_redraw=settings.smc_redraw, backend_path=backend_path,
-                  fp=fp)
+                  p_redraw=settings.smc_redraw, modes=modes, p_jump=settings.smc_jump,
+                  backend_path=backend_path, fp=fp)
     ess = float(smc.ess[-1]) if smc.ess.size else float(n)
     acc = float(smc.acceptance[-1]) if smc.acceptance.size else 1.0
     chain = ChainResult(chain=smc.particles[None], log_prob=(smc.log_lik + smc.log_prior)[None], tau=np.full(layout.dim, n / ess),
@@ -294,6 +335,7 @@ def smc_diagnostics(smc: SMCResult) -> dict:
     uniq = len(np.unique(np.round(smc.particles, 12), axis=0)) / len(smc.particles)
     return {"sampler": "smc", "smc_stages": int(len(smc.betas) - 1), "smc_log_z": float(smc.log_z),
             "smc_n_particles": int(len(smc.particles)), "smc_n_evals": int(smc.n_evals),
+            "smc_modes": int(smc.n_modes),
             "smc_unique_share": float(uniq), "smc_betas": smc.betas.tolist(),
             "smc_acceptance": smc.acceptance.tolist(), "smc_sweeps": smc.sweeps.tolist(),
             "smc_ess": smc.ess.tolist()}

@@ -26,17 +26,16 @@ def quiet_calibrate(*args, **kw):
         return calibrate(*args, **kw)
 
 
-@pytest.mark.parametrize("store_every", [1, 3])
-def test_interrupted_run_resumes_to_the_uninterrupted_chain(tmp_path, monkeypatch, store_every):
-    y = heli_profile(seed=1)
-    settings = TINY.replace(store_every=store_every)
+def interrupted_and_resumed(tmp_path, monkeypatch, y, settings, at: int):
+    """(uninterrupted result, result resumed after a KeyboardInterrupt at the at-th
+    log-posterior call) of the same calibration, checkpoints a.h5 and b.h5."""
     full = quiet_calibrate(y, "HELI", settings=settings, random_state=5, backend_path=tmp_path / "a.h5")
     calls = {"n": 0}
     original = LogPosterior.__call__
 
     def flaky(self, theta):
         calls["n"] += 1
-        if calls["n"] == 250:  # mid-run, mid-block
+        if calls["n"] == at:
             raise KeyboardInterrupt
         return original(self, theta)
 
@@ -44,7 +43,14 @@ def test_interrupted_run_resumes_to_the_uninterrupted_chain(tmp_path, monkeypatc
     with pytest.raises(KeyboardInterrupt):
         quiet_calibrate(y, "HELI", settings=settings, random_state=5, backend_path=tmp_path / "b.h5")
     monkeypatch.setattr(LogPosterior, "__call__", original)
-    resumed = quiet_calibrate(y, "HELI", settings=settings, random_state=5, backend_path=tmp_path / "b.h5")
+    return full, quiet_calibrate(y, "HELI", settings=settings, random_state=5, backend_path=tmp_path / "b.h5")
+
+
+@pytest.mark.parametrize("store_every", [1, 3])
+def test_interrupted_run_resumes_to_the_uninterrupted_chain(tmp_path, monkeypatch, store_every):
+    y = heli_profile(seed=1)
+    settings = TINY.replace(store_every=store_every)
+    full, resumed = interrupted_and_resumed(tmp_path, monkeypatch, y, settings, at=250)  # mid-run, mid-block
     assert 0 < resumed.diagnostics["resumed_at"] < TINY.max_steps
     assert resumed.diagnostics["store_every"] == store_every
     np.testing.assert_array_equal(resumed.draws(), full.draws())
@@ -197,3 +203,31 @@ def test_several_measurements_share_physics_not_phases():
     assert {"phi_a[0]@0", "phi_a[0]@1", "sigma@0", "sigma@1"} <= set(table.index)
     for m in (0, 1):  # one noise level per measurement, both near the 1% used
         assert 0.007 < table.loc[f"sigma@{m}", "mean"] < 0.013
+
+
+def test_cli_calibrate_with_the_smc_sampler(tmp_path, capsys):
+    meas = tmp_path / "m.npz"
+    atomic_savez(meas, profiles=heli_profile(seed=6)[None], labels=np.array(["HELI"]))
+    out = tmp_path / "post.nc"
+    rc = main(["calibrate", str(meas), "--class", "HELI", "--quick", "--sampler", "smc", "--particles", "80",
+               "--starts", "1", "--fit-budget", "300", "--out", str(out)])
+    text = capsys.readouterr().out
+    res = CalibrationResult.load(out)
+    d = res.diagnostics
+    assert d["sampler"] == "smc" and d["smc_n_particles"] == 80 and res.n_draws == 80
+    assert rc == (0 if res.converged else 3) and "tempering stages" in text
+    assert not list(tmp_path.glob("*.chain.h5*"))  # the default checkpoint is removed after success
+    with pytest.raises(SystemExit) as exc:
+        main(["calibrate", str(meas), "--class", "HELI", "--sampler", "pt", "--out", str(out)])
+    assert exc.value.code == 2 and "invalid choice: 'pt'" in capsys.readouterr().err
+
+
+def test_smc_with_mode_jumps_resumes_after_an_interruption(tmp_path, monkeypatch):
+    """The SMC checkpoint carries the mode finder's optima: a resumed run continues
+    to exactly the uninterrupted draws."""
+    s = CalibrationSettings.quick(sampler="smc", n_particles=120, smc_ess=0.5, n_starts=1, fit_budget=200,
+                                  polish_budget=100, smc_polish=2, smc_jump=0.2)
+    full, resumed = interrupted_and_resumed(tmp_path, monkeypatch, heli_profile(seed=5), s, at=150)
+    assert full.diagnostics["smc_modes"] >= 1
+    assert 0 < resumed.diagnostics["resumed_at"] < full.diagnostics["smc_stages"]
+    np.testing.assert_array_equal(resumed.draws(), full.draws())

@@ -129,7 +129,7 @@ def test_calibrate_with_smc_is_complete_and_resumable(tmp_path):
     rng = np.random.default_rng(3)
     y = np.abs(profiles(heli.to_array())[0] + 0.01 * rng.standard_normal(400))
     s = CalibrationSettings.quick(sampler="smc", n_particles=200, smc_ess=0.5, n_starts=1, fit_budget=300,
-                                  polish_budget=200)
+                                  polish_budget=200, smc_polish=1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = calibrate(y, "HELI", settings=s, random_state=2, backend_path=tmp_path / "c.h5")
@@ -138,6 +138,7 @@ def test_calibrate_with_smc_is_complete_and_resumable(tmp_path):
     assert d["sampler"] == "smc" and d["smc_n_particles"] == 200 and d["smc_betas"][-1] == 1.0
     assert res.n_draws == 200 and np.all(np.isfinite(res.draws()))
     assert "SMC:" in res.report() and "tempering stages" in res.report()
+    assert d["smc_modes"] >= 1 and "modes known to the jumps" in res.report()  # mode jumps on by default
     # a rerun on the finished checkpoint resumes at its last stage and gives the same draws
     assert again.diagnostics["resumed_at"] == d["smc_stages"]
     np.testing.assert_array_equal(again.draws(), res.draws())

@@ -1,0 +1,283 @@
+"""Mode jumps for the tempered SMC sampler: local optima found by polishing
+particles, and a Student-t mixture centred on them used as an independence
+proposal.
+
+Why: on a single HELI profile the posterior has modes of similar height that
+differ in several coordinates at once (measured: the alpha-beta line placed 1.4 or
+3 bins from the tone, with its amplitude, phase and the tone offset all moving
+together). Single-coordinate redraws and differential-evolution moves never make
+that joint step, so a mode the tempering did not populate early stays empty and
+the posterior misses it (SBC: the truth lands in modes holding no particle).
+An independence Metropolis-Hastings step from a mixture q over the known modes,
+accepted with ratio pi(x') q(x) / (pi(x) q(x')), moves particles between modes
+and gives each mode its posterior mass whatever q's weights are; q only has to
+cover the modes.
+
+Phases: a component is a Student-t on the wrapped difference to its centre,
+truncated to [-pi, pi) in every phase coordinate (draws outside are redrawn), so
+its density on the circle is exact: the t density of the wrapped difference over
+the component's truncation mass (estimated once by Monte Carlo).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import special
+
+from .priors import wrap
+
+DOF = 5.0  # Student-t degrees of freedom of a component (heavy tails cover a mode's skew)
+INFLATE = 1.5  # component scale over the Laplace scale
+MAX_MODES = 16
+SAME_MODE = 0.02  # optima closer than this (max |difference| / prior width) are one mode
+
+
+def loglik_hessian(loglik, theta: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Hessian (dim, dim) of a smooth, vectorised log-likelihood at theta (dim,) by
+    central differences with steps ``scale`` (dim,), one batch of 2 dim^2 + 1 calls."""
+    d = theta.size
+    e = np.eye(d) * scale
+    pts = [theta]
+    for i in range(d):
+        pts += [theta + e[i], theta - e[i]]
+    pairs = [(i, j) for i in range(d) for j in range(i + 1, d)]
+    for i, j in pairs:
+        pts += [theta + e[i] + e[j], theta + e[i] - e[j], theta - e[i] + e[j], theta - e[i] - e[j]]
+    f = loglik(np.array(pts))
+    f0, fp, fm = f[0], f[1: 2 * d + 1: 2], f[2: 2 * d + 1: 2]
+    h = np.diag((fp - 2 * f0 + fm) / scale**2)
+    q = f[2 * d + 1:].reshape(-1, 4)
+    for (i, j), (pp, pm, mp, mm) in zip(pairs, q):
+        h[i, j] = h[j, i] = (pp - pm - mp + mm) / (4 * scale[i] * scale[j])
+    return h
+
+
+def laplace_cov(hess: np.ndarray, scale: np.ndarray, max_sd: np.ndarray) -> np.ndarray:
+    """Covariance from a log-likelihood Hessian: -H^-1 with curvatures floored so that no
+    direction is wider than ``max_sd`` (dim,) (flat or non-concave directions get the
+    cap), computed in coordinates scaled by ``scale`` for conditioning."""
+    s = np.asarray(scale, float)
+    hs = -hess * s[:, None] * s[None, :]
+    hs = 0.5 * (hs + hs.T)
+    lam, vec = np.linalg.eigh(np.where(np.isfinite(hs), hs, 0.0))
+    floor = 1.0 / np.max(max_sd / s) ** 2
+    lam = np.maximum(lam, floor)
+    return cap_cov((vec / lam) @ vec.T * s[:, None] * s[None, :], max_sd)
+
+
+def cap_cov(cov: np.ndarray, max_sd: np.ndarray) -> np.ndarray:
+    """cov with every coordinate's sd shrunk to at most max_sd (correlations kept)."""
+    sd = np.sqrt(np.diag(cov))
+    c = np.minimum(1.0, max_sd / sd)
+    return cov * c[:, None] * c[None, :]
+
+
+@dataclass
+class ModeMixture:
+    """Equal-weight mixture of truncated multivariate Student-t components.
+
+    means (K, dim); chols (K, dim, dim) lower Cholesky factors of the scale matrices;
+    phase_cols: coordinates on the circle; log_mass (K,): log of each component's
+    probability of a draw inside [-pi, pi) in every phase coordinate."""
+
+    means: np.ndarray
+    chols: np.ndarray
+    phase_cols: np.ndarray
+    log_mass: np.ndarray
+    _inv: np.ndarray | None = None  # inverse Cholesky factors and log normalisers, made on first use
+    _const: np.ndarray | None = None
+
+    @classmethod
+    def build(cls, means, covs, phase_cols, rng: np.random.Generator, n_mc: int = 4000) -> "ModeMixture":
+        means = np.atleast_2d(np.asarray(means, float))
+        chols = np.array([np.linalg.cholesky(c + 1e-12 * np.diag(np.diag(c))) for c in covs])
+        mix = cls(means, chols, np.asarray(phase_cols, int), np.zeros(len(means)))
+        mass = [np.mean(mix._inside(mix._t_draws(k, n_mc, rng))) for k in range(len(means))]
+        mix.log_mass = np.log(np.maximum(mass, 1.0 / n_mc))
+        mix._inv = None
+        return mix
+
+    def _t_draws(self, k: int, n: int, rng) -> np.ndarray:
+        d = self.means.shape[1]
+        z = rng.standard_normal((n, d)) * np.sqrt(DOF / rng.chisquare(DOF, size=(n, 1)))
+        return z @ self.chols[k].T
+
+    def _inside(self, y: np.ndarray) -> np.ndarray:
+        p = self.phase_cols
+        return np.all((y[:, p] >= -np.pi) & (y[:, p] < np.pi), axis=1) if p.size else np.ones(len(y), bool)
+
+    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """n draws (n, dim), phases wrapped."""
+        comp = rng.integers(len(self.means), size=n)
+        out = np.empty((n, self.means.shape[1]))
+        for k in np.unique(comp):
+            idx = np.flatnonzero(comp == k)
+            got = np.empty((0, out.shape[1]))
+            while len(got) < idx.size:
+                y = self._t_draws(k, 2 * idx.size, rng)
+                got = np.concatenate([got, y[self._inside(y)]])
+            out[idx] = self.means[k] + got[: idx.size]
+        if self.phase_cols.size:
+            out[:, self.phase_cols] = wrap(out[:, self.phase_cols])
+        return out
+
+    def logpdf(self, theta: np.ndarray) -> np.ndarray:
+        """Log density (n,) of the mixture at theta (n, dim)."""
+        theta = np.atleast_2d(theta)
+        d = theta.shape[1]
+        if self._inv is None:
+            self._inv = np.linalg.inv(self.chols)
+            self._const = (special.gammaln((DOF + d) / 2) - special.gammaln(DOF / 2) - 0.5 * d * np.log(DOF * np.pi)
+                           - np.log(np.diagonal(self.chols, axis1=1, axis2=2)).sum(axis=1) - self.log_mass)
+        y = theta[None] - self.means[:, None]  # (K, n, d)
+        if self.phase_cols.size:
+            y[..., self.phase_cols] = wrap(y[..., self.phase_cols])
+        sol = np.einsum("kij,knj->kni", self._inv, y)
+        logs = self._const[:, None] - 0.5 * (DOF + d) * np.log1p(np.sum(sol * sol, axis=2) / DOF)
+        return special.logsumexp(logs, axis=0) - np.log(len(self.means))
+
+
+def merge_modes(thetas: np.ndarray, values: np.ndarray, width: np.ndarray, phase_cols,
+                max_modes: int = MAX_MODES) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct optima, best first: thetas (n, dim) with values (n,) (higher is better);
+    two are one mode when every coordinate differs by less than SAME_MODE x width
+    (phases compared on the circle). Returns (modes (K, dim), values (K,))."""
+    order = np.argsort(-np.asarray(values))
+    keep: list[int] = []
+    cols = np.asarray(phase_cols, int)
+    for i in order:
+        ok = True
+        for j in keep:
+            diff = thetas[i] - thetas[j]
+            if cols.size:
+                diff[cols] = wrap(diff[cols])
+            if np.max(np.abs(diff) / width) < SAME_MODE:
+                ok = False
+                break
+        if ok:
+            keep.append(int(i))
+        if len(keep) == max_modes:
+            break
+    return thetas[keep], np.asarray(values)[keep]
+
+
+DISCOVER_AT = (0.0, 1e-3, 1e-2, 0.1, 0.5)
+"""Tempering levels (beta) at which particles are polished to look for new optima."""
+
+
+class ModeFinder:
+    """The optima of a :class:`.likelihood.LogPosterior` found so far, each with its
+    log posterior and Laplace covariance, and the mode mixture built from them.
+
+    At the first stage whose beta reaches each of ``discover_at``, ``n_polish``
+    particles drawn from the population are polished by ``LN_BOBYQA``
+    (``polish_budget`` evaluations each, the fit's objective: sigma profiled out);
+    new optima (see :func:`merge_modes`) get a Hessian of the log-likelihood.
+    ``seed_thetas``: optima known beforehand (the fit's starts). At tempering level
+    beta a component's covariance is the Laplace covariance / beta (the tempered
+    likelihood is wider), inflated by ``INFLATE`` and capped at 0.3 prior widths.
+    """
+
+    def __init__(self, post, *, n_polish: int = 8, polish_budget: int = 800, discover_at=DISCOVER_AT,
+                 seed_thetas=None, max_sd_share: float = 0.3):
+        lay = post.layout
+        self.post, self.n_polish, self.polish_budget = post, int(n_polish), int(polish_budget)
+        self.discover_at = tuple(discover_at)
+        lo, hi = lay.z_bounds()
+        ls = np.log(post.sigma_bounds)
+        self.width = np.concatenate([hi - lo, np.full(lay.M, ls[1] - ls[0])])
+        self.max_sd = max_sd_share * self.width
+        d = lay.dim
+        self.means, self.values, self.covs = np.empty((0, d)), np.empty(0), np.empty((0, d, d))
+        self.n_discoveries = 0
+        self._pending = None if seed_thetas is None else np.atleast_2d(np.asarray(seed_thetas, float))
+
+    # ---- state (checkpoints) ----------------------------------------------------
+    def state(self) -> dict:
+        return {"means": self.means, "values": self.values, "covs": self.covs,
+                "n_discoveries": np.array(self.n_discoveries)}
+
+    def load(self, state: dict) -> None:
+        if state:
+            self.means, self.values, self.covs = state["means"], state["values"], state["covs"]
+            self.n_discoveries = int(state["n_discoveries"])
+            self._pending = None
+
+    # ---- finding ------------------------------------------------------------------
+    def loglik(self, theta: np.ndarray) -> np.ndarray:
+        """Log-likelihood (n,) without the prior (smooth across the prior's bounds)."""
+        from .likelihood import LOG_2PI
+
+        z, ln_sigma = self.post.layout.split_theta(theta)
+        ssr = self.post.ssr(z)
+        n = self.post.n_bins
+        return np.sum(-0.5 * ssr * np.exp(-2 * ln_sigma) - n * ln_sigma - 0.5 * n * LOG_2PI, axis=1)
+
+    def polish(self, thetas: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, int]:
+        """Local optima (n, dim) reached from thetas (n, dim) and the evaluations used."""
+        import nlopt
+
+        from .fit import _run_one
+
+        lay, post = self.post.layout, self.post
+        lo, hi = lay.z_bounds()
+        out, evals = [], 0
+        for th in np.atleast_2d(thetas):
+            z0, _ = lay.split_theta(th[None])
+            u0 = np.clip((z0[0] - lo) / (hi - lo), 0.0, 1.0)
+            u, _, n = _run_one(nlopt, "LN_BOBYQA", post, lo, hi, u0, self.polish_budget,
+                               int(rng.integers(2**31 - 1)))
+            z = lay.canonical(lo + (hi - lo) * u)
+            sig = np.sqrt(post.ssr(z)[0] / post.n_bins)
+            ls = np.log(np.clip(sig, post.sigma_bounds[0] * 1.001, post.sigma_bounds[1] * 0.999))
+            out.append(lay.theta_from_z(z, ls[None])[0])
+            evals += n + 1
+        return np.array(out), evals
+
+    def add(self, optima: np.ndarray) -> int:
+        """Merge optima (n, dim) into the known modes; new ones get a Laplace covariance.
+        Returns the evaluations used."""
+        from .sampler import curvature_scales
+
+        lay = self.post.layout
+        values = self.post(optima)
+        optima, values = optima[np.isfinite(values)], values[np.isfinite(values)]
+        if not len(optima):
+            return len(values)
+        allm = np.concatenate([self.means, optima])
+        allv = np.concatenate([self.values, values])
+        modes, vals = merge_modes(allm, allv, self.width, lay.phase_cols)
+        covs, evals = [], len(values)
+        for mu in modes:
+            known = np.flatnonzero(np.all(self.means == mu, axis=1)) if len(self.means) else []
+            if len(known):
+                covs.append(self.covs[known[0]])
+                continue
+            scale = curvature_scales(lay, mu, self.post)
+            hess = loglik_hessian(self.loglik, mu, 0.5 * scale)
+            evals += 2 * lay.dim**2 + 1 + 2 * lay.dim + 1
+            covs.append(laplace_cov(hess, scale, self.max_sd))
+        self.means, self.values, self.covs = modes, vals, np.array(covs)
+        return evals
+
+    def update(self, theta: np.ndarray, beta: float, rng: np.random.Generator) -> int:
+        """Called once per SMC stage with the resampled population at level beta:
+        polish particles when beta has reached the next discovery level."""
+        evals = 0
+        if self._pending is not None:
+            evals += self.add(self._pending)
+            self._pending = None
+        while self.n_discoveries < len(self.discover_at) and beta >= self.discover_at[self.n_discoveries]:
+            self.n_discoveries += 1
+            uniq = np.unique(theta, axis=0)
+            pick = uniq[rng.choice(len(uniq), size=min(self.n_polish, len(uniq)), replace=False)]
+            optima, n = self.polish(pick, rng)
+            evals += n + self.add(optima)
+        return evals
+
+    def mixture(self, beta: float, rng: np.random.Generator) -> ModeMixture | None:
+        if not len(self.means):
+            return None
+        covs = [cap_cov(c * INFLATE**2 / max(beta, 1e-12), self.max_sd) for c in self.covs]
+        return ModeMixture.build(self.means, covs, self.post.layout.phase_cols, rng)
