@@ -110,7 +110,8 @@ def run_calibration(post: LogPosterior, ref: ClassParams, settings: CalibrationS
             n_walkers += n_walkers % 2
             p0, n_modes = start_walkers(post, fit, settings, n_walkers, np.random.default_rng(ball_ss))
             chain = run_sampler(post, p0, settings, seed=int(mc_ss.generate_state(1)[0]),
-                                backend_path=backend_path, fp=fp, phase_cols=layout.phase_cols)
+                                backend_path=backend_path, fp=fp, phase_cols=layout.phase_cols,
+                                relabel=layout.random_relabel)
         theta = chain.draws()
         lp = chain.draws_log_prob()
         if len(theta) > MAX_DRAWS:

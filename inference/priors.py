@@ -17,6 +17,15 @@ Hazards, handled here:
   leaves f(x) unchanged (the mixing terms use |w_a + w_b| and |w_a - w_b|), so the
   prior requires w_a < w_b; A_a and A_b share bounds so the swap maps the prior
   onto itself. Engine permutation: the prior requires w_a[0] < w_a[1] < ...
+* Line relabelling (exact): the model is a sum over the four vibration terms
+  a, b, p, m, each a line (A, w, phi) with w_p = C_p (w_a + w_b) and
+  w_m = C_m |w_a - w_b| the only ties between them. Giving the four lines of an
+  engine to the four roles in another order (and recomputing C_p, C_m so that
+  every line keeps its frequency) leaves f(x) unchanged, so every labelling
+  whose C's fall inside the prior is an equally likely mode. Which line is the
+  roll, the pitch or a mixing term is only told apart by the prior; the samplers
+  move between labellings with :meth:`Layout.relabel` (measured: this, not
+  noise, was most of the HELI posterior's multimodality).
 * Phases live on the circle: uniform prior, no boundary. The fit works on angles
   in a [-pi, pi] box (nlopt needs a box); the sampler's moves are translations
   taken modulo 2 pi (:mod:`.sampler`), so walkers cross +-pi freely; summaries of
@@ -29,6 +38,7 @@ any bound can be overridden.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +47,8 @@ from ..generator import IDX, N_PARAMS, ClassParams
 from ..radar import RadarConfig
 
 SHARED = ("A_a", "A_b", "A_p", "A_m", "w_a", "w_b", "C_p", "C_m")
+PERMUTATIONS = tuple(itertools.permutations(range(4)))
+"""The 24 ways of giving an engine's four lines to the roles (a, b, p, m)."""
 PHASE_NAMES = ("phi_a", "phi_b", "phi_p", "phi_m")
 TWO_PI = 2.0 * np.pi
 OFFSET_BINS = {"tone": (-4.0, 4.0), "peak": (-0.5, 0.5)}
@@ -257,6 +269,67 @@ class Layout:
             out[i] = self.z_from_physics(x[i].reshape(self.M, -1), off[i])
         return out
 
+    def relabel(self, theta: np.ndarray, engine: np.ndarray, perm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Give engine ``engine[i]``'s four lines to the roles (a, b, p, m) in the order
+        ``PERMUTATIONS[perm[i]]`` (role r takes line PERMUTATIONS[.][r]) in row i of
+        theta (n, dim): amplitudes, frequencies and every measurement's phases follow
+        their line, C_p and C_m are recomputed so each line keeps its frequency.
+        f(x) is unchanged (see the module docstring). Returns (theta' (n, dim),
+        log |Jacobian| (n,) of the map, log(S D) - log(S' D') with S = w_a + w_b and
+        D = |w_b - w_a|, for the Metropolis-Hastings ratio)."""
+        theta = np.array(np.atleast_2d(theta), dtype=float)
+        n = len(theta)
+        rows = np.arange(n)
+        order = np.asarray(PERMUTATIONS)[np.asarray(perm, int)]  # (n, 4)
+        cols = np.array([[self.shared_col(k, f"A_{r}") for r in "abpm"] for k in range(self.E)])[engine]
+        wa_c = np.array([self.shared_col(k, "w_a") for k in range(self.E)])[engine]
+        wb_c = np.array([self.shared_col(k, "w_b") for k in range(self.E)])[engine]
+        cp_c = np.array([self.shared_col(k, "C_p") for k in range(self.E)])[engine]
+        cm_c = np.array([self.shared_col(k, "C_m") for k in range(self.E)])[engine]
+        wa, wb = theta[rows, wa_c], theta[rows, wb_c]
+        s, d = wa + wb, np.abs(wb - wa)
+        lines_w = np.column_stack([wa, wb, theta[rows, cp_c] * s, theta[rows, cm_c] * d])
+        lines_a = theta[rows[:, None], cols]
+        new_w = np.take_along_axis(lines_w, order, axis=1)
+        theta[rows[:, None], cols] = np.take_along_axis(lines_a, order, axis=1)
+        s2, d2 = new_w[:, 0] + new_w[:, 1], np.abs(new_w[:, 1] - new_w[:, 0])
+        theta[rows, wa_c], theta[rows, wb_c] = new_w[:, 0], new_w[:, 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            theta[rows, cp_c] = new_w[:, 2] / s2
+            theta[rows, cm_c] = new_w[:, 3] / d2
+            log_jac = np.log(s * d) - np.log(s2 * d2)
+        for m in range(self.M):
+            base = self.n_shared + m * self.n_meas_z + 4 * np.asarray(engine, int)
+            pc = base[:, None] + np.arange(4)[None, :]  # phase columns in PHASE_NAMES order (a, b, p, m)
+            theta[rows[:, None], pc] = np.take_along_axis(theta[rows[:, None], pc], order, axis=1)
+        bad = ~np.isfinite(theta).all(axis=1) | ~np.isfinite(log_jac)
+        log_jac[bad] = -np.inf  # w_a' = w_b': C_m' undefined (measure zero), rejected
+        return theta, log_jac
+
+    def random_relabel(self, theta: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`relabel` of every row to a labelling drawn uniformly among the other
+        labellings of a uniformly drawn engine that the prior allows (rows with none
+        stay put). Symmetric: which labellings the prior allows depends on the lines
+        only, so from the new point the old one is drawn with the same probability.
+        rng: numpy Generator or legacy RandomState (emcee's). Returns (theta', log
+        |Jacobian|)."""
+        theta = np.atleast_2d(theta)
+        n, k = len(theta), len(PERMUTATIONS) - 1
+        draw = rng.integers if hasattr(rng, "integers") else rng.randint
+        engine = draw(0, self.E, size=n)
+        cand, log_jac = self.relabel(np.repeat(theta, k, axis=0), np.repeat(engine, k),
+                                     np.tile(np.arange(1, k + 1), n))
+        with np.errstate(invalid="ignore"):
+            ok = (np.isfinite(log_jac) & np.isfinite(self.log_prior(cand, (1e-300, 1e300)))).reshape(n, k)
+        count = ok.sum(axis=1)
+        pick = np.minimum((rng.uniform(size=n) * np.maximum(count, 1)).astype(int), np.maximum(count - 1, 0))
+        col = np.argmax(np.cumsum(ok, axis=1) > pick[:, None], axis=1)
+        rows = np.arange(n) * k + col
+        out, lj = cand[rows].copy(), log_jac[rows].copy()
+        none = count == 0
+        out[none], lj[none] = theta[none], 0.0
+        return out, lj
+
     # ---- prior ----------------------------------------------------------------------
     def log_prior(self, theta: np.ndarray, sigma_bounds: tuple[float, float]) -> np.ndarray:
         """Log prior density of theta (W, dim): 0 inside the support, -inf outside (phases
@@ -284,6 +357,46 @@ class Layout:
             th = self.theta_from_z(z, ls)
             out = np.concatenate([out, th[np.isfinite(self.log_prior(th, sigma_bounds))]])
         return out[:n]
+
+
+def engine_lines(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The four vibration lines of engine vectors x (..., 13) in role order (a, b, p, m):
+    frequencies (..., 4) in rad/s (w_p = C_p |w_a + w_b|, w_m = C_m |w_a - w_b|),
+    amplitudes (..., 4) in m and phases (..., 4) in rad."""
+    col = lambda n: x[..., IDX[n]]  # noqa: E731
+    w = np.stack([col("w_a"), col("w_b"), col("C_p") * np.abs(col("w_a") + col("w_b")),
+                  col("C_m") * np.abs(col("w_b") - col("w_a"))], axis=-1)
+    return w, x[..., [IDX[f"A_{r}"] for r in "abpm"]], x[..., [IDX[p] for p in PHASE_NAMES]]
+
+
+def align_lines(x: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Parameter vectors x (n, 13E) relabelled, engine by engine, to the labelling of
+    ``reference`` (13E,): each engine's four lines (A, w, phi) are given to the
+    roles (a, b, p, m) in the order whose line frequencies are closest to the
+    reference's (sum of |log w - log w_ref|), C_p and C_m recomputed. f(x) is
+    unchanged (:meth:`Layout.relabel`); use it to read a posterior that moves
+    between labellings in the labelling of a reference vector (label switching
+    undone as in mixture models)."""
+    x = np.array(np.atleast_2d(x), dtype=float)
+    n, e = len(x), x.shape[1] // N_PARAMS
+    xe = x.reshape(n, e, N_PARAMS)
+    ref = np.asarray(reference, float).reshape(e, N_PARAMS)
+    perms = np.asarray(PERMUTATIONS)
+    w, a, ph = engine_lines(xe)
+    w_ref, _, _ = engine_lines(ref)
+    with np.errstate(divide="ignore"):
+        cost = np.abs(np.log(np.maximum(w[:, :, perms], 1e-300)) - np.log(w_ref)[None, :, None, :]).sum(-1)
+    best = perms[np.argmin(cost, axis=2)]  # (n, e, 4)
+    w2, a2, ph2 = (np.take_along_axis(v, best, -1) for v in (w, a, ph))
+    out = xe.copy()
+    for j, r in enumerate("ab"):
+        out[..., IDX[f"A_{r}"]], out[..., IDX[f"w_{r}"]], out[..., IDX[f"phi_{r}"]] = a2[..., j], w2[..., j], ph2[..., j]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out[..., IDX["C_p"]] = w2[..., 2] / np.abs(w2[..., 0] + w2[..., 1])
+        out[..., IDX["C_m"]] = w2[..., 3] / np.abs(w2[..., 1] - w2[..., 0])
+    for j, r in ((2, "p"), (3, "m")):
+        out[..., IDX[f"A_{r}"]], out[..., IDX[f"phi_{r}"]] = a2[..., j], ph2[..., j]
+    return out.reshape(n, e * N_PARAMS)
 
 
 def wrap(phi):

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..generator import IDX, N_PARAMS, PARAM_NAMES
-from .priors import PHASE_NAMES, SHARED, Priors, wrap
+from .priors import PHASE_NAMES, SHARED, Priors, engine_lines, wrap
 
 FORMAT = "mdaug-posterior-1"
 IDENTIFIED_RATIO = 0.5  # posterior sd / prior sd above this: "stays near its prior"
@@ -128,6 +128,16 @@ class CalibrationResult:
         return x.reshape(n, e * N_PARAMS)
 
     # ---- summaries -------------------------------------------------------------------
+    def lines(self) -> np.ndarray:
+        """Label-free view of the posterior (n_draws, E, 4, 2): every engine's four
+        vibration lines as (frequency rad/s, amplitude m), sorted by frequency.
+        Which line is the roll, the pitch or a mixing term is a labelling the data
+        cannot fix (:mod:`.priors`); the lines themselves are what one profile
+        identifies."""
+        w, a, _ = engine_lines(self.draws().reshape(self.n_draws, self.n_engines, N_PARAMS))
+        order = np.argsort(w, axis=-1)
+        return np.stack([np.take_along_axis(w, order, -1), np.take_along_axis(a, order, -1)], axis=-1)
+
     def summary(self):
         """pandas DataFrame, one row per parameter: mean, sd, q05, q95 (90% interval),
         prior_sd, sd_ratio (posterior/prior; phases: circular variance 1 - R),

@@ -4,7 +4,9 @@
   curvature of log p (:func:`curvature_scales`, x ``init_ball``): tight where the
   data pin a parameter, wide (up to 0.3 prior widths) where they do not.
 * Moves: differential evolution (``DEMove``, three step scales) taken modulo 2 pi
-  on the phases, so phases live on the circle without boundaries (:func:`make_moves`).
+  on the phases, so phases live on the circle without boundaries, and (a share
+  ``settings.relabel``) the line relabelling of :meth:`.priors.Layout.random_relabel`,
+  an exact symmetry no translation crosses (:func:`make_moves`).
 * The chain runs in blocks of ``check_every`` steps (aligned to absolute step
   numbers, so a resumed run checks at the same steps as an uninterrupted one);
   after each block the integrated autocorrelation time tau of every coordinate is
@@ -120,7 +122,7 @@ def estimate_tau(chain: np.ndarray, phase_cols=(), discard: float = 1 / 3) -> np
     return tau
 
 
-def make_moves(phase_cols, dim: int):
+def make_moves(phase_cols, dim: int, relabel=None, p_relabel: float = 0.0):
     """Differential-evolution moves whose proposals are wrapped on the phase columns.
 
     A DE proposal is a translation x + gamma (x_j - x_k) + noise whose law is symmetric
@@ -132,6 +134,9 @@ def make_moves(phase_cols, dim: int):
     steps: the posterior's ridges are narrow, the standard scale alone accepts ~2%),
     the standard scale, and gamma = 1 (10%: swaps a walker between the regions
     occupied by two others, the mode-hopping move of ter Braak 2006).
+    ``relabel`` (coords, random) -> (coords', log |Jacobian|): a random bijection
+    whose inverse is as likely (:meth:`.priors.Layout.random_relabel`), used as an
+    emcee ``MHMove`` for a share ``p_relabel`` of the steps (the DE weights shrink).
     """
     import emcee
 
@@ -145,7 +150,11 @@ def make_moves(phase_cols, dim: int):
             return q, f
 
     g_default = 2.38 / np.sqrt(2 * dim)
-    return [(WrappedDEMove(gamma0=f * g_default if f else 1.0), w) for f, w in DE_MIX]
+    share = 1.0 - (p_relabel if relabel is not None else 0.0)
+    moves = [(WrappedDEMove(gamma0=f * g_default if f else 1.0), w * share) for f, w in DE_MIX]
+    if relabel is not None and p_relabel > 0:
+        moves.append((emcee.moves.MHMove(relabel), p_relabel))
+    return moves
 
 
 def curvature_scales(layout, theta_best: np.ndarray, log_post, rel_step: float = 0.01, cap: float = 0.3):
@@ -224,18 +233,19 @@ def _check_backend(path: Path, fp: str, shape) -> int:
 
 
 def run_sampler(log_post, p0: np.ndarray, settings, seed: int, backend_path=None,
-                fp: str = "", phase_cols=()) -> ChainResult:
+                fp: str = "", phase_cols=(), relabel=None) -> ChainResult:
     """Run (or resume) the ensemble; see the module docstring.
 
     log_post: vectorised callable theta (W, dim) -> (W,); p0: (W, dim) start (ignored
     when the backend already holds steps); seed: int for emcee's RandomState;
-    phase_cols: columns that live on the circle (wrapped by the moves).
+    phase_cols: columns that live on the circle (wrapped by the moves); relabel: the
+    exact-symmetry move (``settings.relabel`` of the steps), see :func:`make_moves`.
     """
     import emcee
 
     t0 = time.perf_counter()
     n_walkers, dim = p0.shape
-    moves = make_moves(phase_cols, dim)
+    moves = make_moves(phase_cols, dim, relabel, settings.relabel)
     backend, resumed_at = None, 0
     if backend_path is not None:
         path = Path(backend_path)

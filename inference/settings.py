@@ -29,6 +29,11 @@ class CalibrationSettings:
     they are split over every distinct fit start within 10 nats of the best (rival
     modes), so a multimodal posterior is started on all the modes the fit found.
 
+    Both samplers: a share ``relabel`` of the moves give an engine's four lines to
+    the roles (a, b, p, m) in a random other order (an exact symmetry of f(x), see
+    :mod:`.priors`), so the posterior covers every labelling the prior allows; 0
+    switches it off.
+
     Model: ``normalisation`` of measured and model profiles (SPEC section 2);
     ``alignment`` ``tone`` (default) compares the data with model windows centred on
     the carrier bin and fits a per-measurement offset of the tone (uniform on the
@@ -84,6 +89,7 @@ class CalibrationSettings:
     smc_max_stages: int = 500
     smc_jump: float = 0.1
     smc_polish: int = 8
+    relabel: float = 0.1
 
     def __post_init__(self) -> None:
         if self.fit_algorithm not in FIT_ALGORITHMS:
@@ -105,6 +111,8 @@ class CalibrationSettings:
             raise ValueError(f"alignment must be 'tone' or 'peak', got {self.alignment!r}")
         if self.sampler not in SAMPLERS:
             raise ValueError(f"sampler must be one of {SAMPLERS}, got {self.sampler!r}")
+        if not 0 <= self.relabel < 1 or self.smc_jump + self.relabel >= 1:
+            raise ValueError(f"relabel must be in [0, 1) with smc_jump + relabel < 1, got {self.relabel}")
         if not (0 <= self.smc_jump < 1 and self.smc_redraw + self.smc_jump < 1 and self.smc_polish >= 0):
             raise ValueError(f"smc_jump must be in [0, 1) with smc_redraw + smc_jump < 1 and smc_polish >= 0, "
                              f"got {self.smc_jump}, {self.smc_redraw}, {self.smc_polish}")

@@ -109,7 +109,7 @@ def systematic_resample(w: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 
 def de_sweep(theta, ll, lprior, beta, target, rng, phase_cols=(), bounds=None, p_redraw: float = 0.0,
-             mixture=None, p_jump: float = 0.0):
+             mixture=None, p_jump: float = 0.0, relabel=None, p_relabel: float = 0.0):
     """One sweep: the two halves of the population move in turn by Metropolis steps
     under prior x L^beta. target: theta (n, dim) -> (log prior (n,), log lik (n,)).
     Proposals: DE translations; with probability ``p_redraw`` (needs ``bounds`` =
@@ -118,8 +118,12 @@ def de_sweep(theta, ll, lprior, beta, target, rng, phase_cols=(), bounds=None, p
     which lets a particle jump straight to a distant narrow mode of that coordinate.
     With probability ``p_jump`` (needs ``mixture``, a :class:`.modes.ModeMixture`)
     instead an independence proposal from the mixture over known modes, accepted
-    with the ratio that includes q(old) / q(new). Every particle picks its kernel
-    independently of its state, so the sweep is a mixture of valid kernels.
+    with the ratio that includes q(old) / q(new). With probability ``p_relabel``
+    (needs ``relabel``: (theta (k, dim), rng) -> (theta', log |Jacobian|), a random
+    bijection whose inverse is as likely, e.g. :meth:`.priors.Layout.random_relabel`)
+    the proposal is that map, accepted with the Jacobian in the ratio. Every
+    particle picks its kernel independently of its state, so the sweep is a mixture
+    of valid kernels.
     Returns (theta, ll, lprior, acceptance share); arrays are updated copies."""
     theta, ll, lprior = theta.copy(), ll.copy(), lprior.copy()
     n, dim = theta.shape
@@ -146,10 +150,14 @@ def de_sweep(theta, ll, lprior, beta, target, rng, phase_cols=(), bounds=None, p
             c = rng.integers(dim, size=redraw.size)
             prop[redraw] = theta[move[redraw]]
             prop[redraw, c] = rng.uniform(bounds[0][c], bounds[1][c])
-        jump = np.zeros(m, bool)
-        if mixture is not None and p_jump > 0:
-            jump = rng.uniform(size=m) < p_jump
+        kernel = rng.uniform(size=m)
+        jump = (kernel < p_jump) if mixture is not None else np.zeros(m, bool)
+        if jump.any():
             prop[jump] = mixture.sample(int(jump.sum()), rng)
+        swap = (kernel >= p_jump) & (kernel < p_jump + p_relabel) if relabel is not None else np.zeros(m, bool)
+        log_jac = np.zeros(m)
+        if swap.any():
+            prop[swap], log_jac[swap] = relabel(theta[move[swap]], rng)
         if cols.size:
             prop[:, cols] = wrap(prop[:, cols])
         lp_new, ll_new = target(prop)
@@ -157,6 +165,7 @@ def de_sweep(theta, ll, lprior, beta, target, rng, phase_cols=(), bounds=None, p
             log_a = (lp_new + beta * np.where(np.isfinite(lp_new), ll_new, 0.0)) - (lprior[move] + beta * ll[move])
             if jump.any():
                 log_a[jump] += mixture.logpdf(theta[move[jump]]) - mixture.logpdf(prop[jump])
+            log_a += log_jac
         acc = np.log(rng.uniform(size=m)) < np.where(np.isfinite(log_a), log_a, -np.inf)
         idx = move[acc]
         theta[idx], ll[idx], lprior[idx] = prop[acc], ll_new[acc], lp_new[acc]
@@ -193,7 +202,7 @@ def _save_checkpoint(path: Path, fp: str, rng, **arrays) -> None:
 def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float = 0.5, p_move: float = 0.99,
             min_sweeps: int = 2, max_sweeps: int = 40, max_stages: int = 500, min_acceptance: float = 0.02,
             phase_cols=(), bounds=None, p_redraw: float = 0.0, modes=None, p_jump: float = 0.0,
-            backend_path=None, fp: str = "") -> SMCResult:
+            relabel=None, p_relabel: float = 0.0, backend_path=None, fp: str = "") -> SMCResult:
     """Adaptive tempered SMC from the prior to the posterior (see the module docstring).
 
     target: theta (n, dim) -> (log prior (n,), log likelihood (n,)), vectorised;
@@ -208,7 +217,8 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
     (:class:`.modes.ModeFinder` or any object with ``update(theta, beta, rng) ->
     evaluations``, ``mixture(beta, rng)``, ``state()`` and ``load(state)``) asked
     before every rejuvenation to look for new optima and for the mode mixture that
-    ``p_jump`` of the proposals are drawn from (see :func:`de_sweep`).
+    ``p_jump`` of the proposals are drawn from (see :func:`de_sweep`). relabel,
+    p_relabel: an exact-symmetry move (see :func:`de_sweep`).
     backend_path: npz checkpoint (resumable, see above).
     """
     t0 = time.perf_counter()
@@ -249,7 +259,7 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
         acc_sum, sweeps, need = 0.0, 0, min_sweeps
         while sweeps < need:
             theta, ll, lprior, a = de_sweep(theta, ll, lprior, b, target, rng, phase_cols, bounds, p_redraw,
-                                            mixture, p_jump)
+                                            mixture, p_jump, relabel, p_relabel)
             n_evals += n
             sweeps += 1
             acc_sum += a
@@ -321,11 +331,11 @@ def calibrate_smc(post, settings, seed, backend_path=None, fp: str = "", fit=Non
                   ess_target=settings.smc_ess, p_move=settings.smc_p_move, max_sweeps=settings.smc_max_sweeps,
                   max_stages=settings.smc_max_stages, phase_cols=layout.phase_cols, bounds=bounds,
                   p_redraw=settings.smc_redraw, modes=modes, p_jump=settings.smc_jump,
-                  backend_path=backend_path, fp=fp)
+                  relabel=layout.random_relabel, p_relabel=settings.relabel, backend_path=backend_path, fp=fp)
     ess = float(smc.ess[-1]) if smc.ess.size else float(n)
     acc = float(smc.acceptance[-1]) if smc.acceptance.size else 1.0
-    chain = ChainResult(chain=smc.particles[None], log_prob=(smc.log_lik + smc.log_prior)[None], tau=np.full(layout.dim, n / ess),
-                        burn=0, thin=1, acceptance=np.full(n, acc), converged=smc.converged, reason=smc.reason,
+    chain = ChainResult(chain=smc.particles[None], log_prob=(smc.log_lik + smc.log_prior)[None],
+                        tau=np.full(layout.dim, n / ess), burn=0, thin=1, acceptance=np.full(n, acc), converged=smc.converged, reason=smc.reason,
                         seconds=smc.seconds, resumed_at=smc.resumed_at, store_every=1)
     return chain, smc
 
