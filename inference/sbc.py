@@ -42,15 +42,18 @@ def sbc_quantities(layout: Layout, theta: np.ndarray) -> tuple[np.ndarray, list[
 def run_sbc(reference: ClassParams | str = "HELI", n_replicates: int = 20, *,
             settings: CalibrationSettings | None = None,
             seed=0, sigma=(0.005, 0.03), n_rank: int = 99, n_bins: int = 5, n_engines: int | None = None,
-            radar: RadarConfig = RadarConfig(), progress=None) -> dict:
+            radar: RadarConfig = RadarConfig(), progress=None, prior_overrides: dict | None = None) -> dict:
     """Run SBC; returns ranks (R, q), names, p-values per quantity, pooled chi-square
-    p-value, the share of converged runs and the settings used."""
+    p-value, the share of converged runs and the settings used. prior_overrides:
+    name=(lo, hi) bounds passed to :meth:`.priors.Priors.from_reference` (the truths
+    are drawn from, and the calibrations use, that prior)."""
     from scipy import stats
 
     ref = load_reference(reference) if isinstance(reference, str) else reference
     settings = (settings or CalibrationSettings.quick()).replace(sigma_min=sigma[0], sigma_max=sigma[1])
     e = ref.n_engines if n_engines is None else int(n_engines)
-    layout = Layout(e, 1, Priors.from_reference(ref, radar, alignment=settings.alignment), settings.range_offset)
+    priors = Priors.from_reference(ref, radar, alignment=settings.alignment, **(prior_overrides or {}))
+    layout = Layout(e, 1, priors, settings.range_offset)
     root = np.random.SeedSequence(seed)
     ranks, converged, names = [], [], None
     for i, ss in enumerate(root.spawn(n_replicates)):

@@ -167,9 +167,10 @@ def test_sbc_short_ranks_are_not_grossly_biased():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(reason="known limitation: on the multimodal single-profile HELI posterior the ensemble "
-                          "does not mix within the budget, so posteriors are too narrow (see "
-                          "tests/benchmarks/inference.py, section 6)", strict=False)
+@pytest.mark.xfail(reason="known limitation: beyond the line labellings (which the relabelling move covers) the "
+                          "single-profile HELI posterior has modes the ensemble does not reach, so posteriors are "
+                          "too narrow (see tests/benchmarks/inference.py, sections 6-7, and the README)",
+                   strict=False)
 def test_sbc_uniform_ranks():
     from mdaug.inference.sbc import run_sbc
 

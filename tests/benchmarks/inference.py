@@ -9,8 +9,10 @@ Prints, all with 1 thread:
 4. a full HELI calibration with the default settings (fit + MCMC to 50 tau or budget);
 5. a QUAD run with a capped budget (time per step, tau so far);
 6. simulation-based calibration: rank-uniformity statistics over many prior draws;
-7. SBC of the default emcee sampler against the opt-in tempered SMC
-   (``--sections sbc_compare``): outer-10% share, chi-square and KS p, s/calibration;
+7. SBC of the default emcee sampler against the opt-in tempered SMC with and
+   without mode jumps (``--sections sbc_compare``, ``--samplers``, ``--sbc-draws``):
+   outer-10% share, chi-square and KS p, p of the truth's log-posterior rank,
+   s/calibration;
 8. a HELI calibration with ``sampler="smc"`` at default settings (time).
 
 ``--quick`` shrinks every section (for a smoke run).
@@ -180,7 +182,7 @@ def section_sbc(quick):
           f"{np.mean((r < 0.05) | (r > 0.95)):.2f}")
 
 
-OPTIONS = {"smc_particles": 0, "samplers": "emcee,smc,smc-nojump", "sbc_draws": 24}
+OPTIONS = {"smc_particles": 0, "samplers": "emcee,smc,smc-nojump", "sbc_draws": 24, "sbc_c_bounds": None}
 
 
 def section_sbc_compare(quick):
@@ -189,7 +191,7 @@ def section_sbc_compare(quick):
 
     n = 4 if quick else OPTIONS["sbc_draws"]
     print(f"\n== 7. SBC, emcee vs tempered SMC ({n} prior draws each, HELI, noise sigma in [0.005, 0.03], "
-          "1 thread, 49 posterior draws ranked, 5 rank bins)")
+          f"C_p, C_m prior {OPTIONS['sbc_c_bounds'] or (0.5, 1.5)}, 1 thread, 49 posterior draws ranked, 5 rank bins)")
     smc = CalibrationSettings.quick(sampler="smc", n_particles=OPTIONS["smc_particles"], smc_polish=8)
     configs = {"emcee": CalibrationSettings.quick(max_steps=600 if quick else 3000), "smc": smc,
                "smc-nojump": smc.replace(smc_jump=0.0)}
@@ -200,7 +202,9 @@ def section_sbc_compare(quick):
 
     for name, s in configs.items():
         t = time.perf_counter()
-        out = run_sbc("HELI", n, settings=s, seed=1, n_rank=49, n_bins=5)
+        c = OPTIONS["sbc_c_bounds"]
+        out = run_sbc("HELI", n, settings=s, seed=1, n_rank=49, n_bins=5,
+                      prior_overrides={"C_p": c, "C_m": c} if c else None)
         took = (time.perf_counter() - t) / n
         r = out["ranks"] / out["n_rank"]
         outer = np.mean((r < 0.05) | (r > 0.95))
@@ -242,8 +246,11 @@ def main():
     ap.add_argument("--smc-particles", type=int, default=0, help="SMC particles in sections 7, 8 (0 = auto)")
     ap.add_argument("--samplers", default=OPTIONS["samplers"], help="samplers compared in section 7")
     ap.add_argument("--sbc-draws", type=int, default=24, help="prior draws per sampler in section 7")
+    ap.add_argument("--sbc-c-bounds", default=None, help="LO,HI prior bounds of C_p and C_m in section 7 "
+                    "(default: the reference-derived 0.5,1.5)")
     args = ap.parse_args()
-    OPTIONS.update(smc_particles=args.smc_particles, samplers=args.samplers, sbc_draws=args.sbc_draws)
+    OPTIONS.update(smc_particles=args.smc_particles, samplers=args.samplers, sbc_draws=args.sbc_draws,
+                   sbc_c_bounds=tuple(map(float, args.sbc_c_bounds.split(","))) if args.sbc_c_bounds else None)
     for name in args.sections.split(","):
         t = time.perf_counter()
         SECTIONS[name](args.quick)
