@@ -251,6 +251,9 @@ def main():
     args = ap.parse_args()
     OPTIONS.update(smc_particles=args.smc_particles, samplers=args.samplers, sbc_draws=args.sbc_draws,
                    sbc_c_bounds=tuple(map(float, args.sbc_c_bounds.split(","))) if args.sbc_c_bounds else None)
+    unknown = [n for n in args.sections.split(",") if n not in SECTIONS]
+    if unknown:
+        ap.error(f"--sections: unknown {unknown}; choose from {list(SECTIONS)}")
     for name in args.sections.split(","):
         t = time.perf_counter()
         SECTIONS[name](args.quick)
