@@ -119,14 +119,18 @@ class LogPosterior:
         s = np.exp(ln_sigma)[:, :, None]
         return -0.5 * (r / s) ** 2 - np.log(s) - 0.5 * LOG_2PI
 
+    def log_likelihood(self, theta: np.ndarray) -> np.ndarray:
+        """Log-likelihood (W,) of theta (W, dim), prior ignored (smooth across its bounds)."""
+        z, ln_sigma = self.layout.split_theta(np.atleast_2d(theta))
+        ssr = self.ssr(z)
+        ll = -0.5 * ssr * np.exp(-2 * ln_sigma) - self.n_bins * ln_sigma - 0.5 * self.n_bins * LOG_2PI
+        return ll.sum(axis=1)
+
     def __call__(self, theta: np.ndarray) -> np.ndarray:
         theta = np.atleast_2d(theta)
         lp = self.layout.log_prior(theta, self.sigma_bounds)
         ok = np.isfinite(lp)
         out = np.full(theta.shape[0], -np.inf)
         if ok.any():
-            z, ln_sigma = self.layout.split_theta(theta[ok])
-            ssr = self.ssr(z)
-            ll = -0.5 * ssr * np.exp(-2 * ln_sigma) - self.n_bins * ln_sigma - 0.5 * self.n_bins * LOG_2PI
-            out[ok] = lp[ok] + ll.sum(axis=1)
+            out[ok] = lp[ok] + self.log_likelihood(theta[ok])
         return out

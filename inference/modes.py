@@ -205,15 +205,6 @@ class ModeFinder:
             self._pending = None
 
     # ---- finding ------------------------------------------------------------------
-    def loglik(self, theta: np.ndarray) -> np.ndarray:
-        """Log-likelihood (n,) without the prior (smooth across the prior's bounds)."""
-        from .likelihood import LOG_2PI
-
-        z, ln_sigma = self.post.layout.split_theta(theta)
-        ssr = self.post.ssr(z)
-        n = self.post.n_bins
-        return np.sum(-0.5 * ssr * np.exp(-2 * ln_sigma) - n * ln_sigma - 0.5 * n * LOG_2PI, axis=1)
-
     def polish(self, thetas: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, int]:
         """Local optima (n, dim) reached from thetas (n, dim) and the evaluations used."""
         import nlopt
@@ -255,7 +246,7 @@ class ModeFinder:
                 covs.append(self.covs[known[0]])
                 continue
             scale = curvature_scales(lay, mu, self.post)
-            hess = loglik_hessian(self.loglik, mu, 0.5 * scale)
+            hess = loglik_hessian(self.post.log_likelihood, mu, 0.5 * scale)
             evals += 2 * lay.dim**2 + 1 + 2 * lay.dim + 1
             covs.append(laplace_cov(hess, scale, self.max_sd))
         self.means, self.values, self.covs = modes, vals, np.array(covs)
