@@ -6,11 +6,9 @@ Subpackages, lowest first (imports only point down):
 - ``mdaug.generator``: the vibration model, f(x), augmenters and the scene simulator;
 - ``mdaug.inference``: likelihood, priors, nlopt fit, emcee posterior;
 - ``mdaug.classify``: classifiers, metrics, the sigma_P protocol, the tsaug baseline;
-- ``mdaug.reports``: the study and its report.
+- ``mdaug.reports``: the study and its report;
+- ``mdaug.cli``: the ``mdaug`` command (one module per group of verbs), on top.
 """
-from importlib.metadata import PackageNotFoundError, version as _version
+from .radar.version import package_version as _package_version
 
-try:
-    __version__ = _version("mdaug")
-except PackageNotFoundError:  # running from a source tree that is not installed
-    __version__ = "0.0.0+unknown"
+__version__ = _package_version()

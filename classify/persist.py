@@ -24,8 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
-from ..radar import DataFileError, atomic_write
+from ..radar import DataFileError, atomic_write, package_version
 from .base import ProfileClassifier
 from .models import classifier_class
 
@@ -60,7 +59,7 @@ def save_model(model: ProfileClassifier, path) -> Path:
             "params": model.params(), "classes": model.classes_.tolist(),
             "n_features": model.n_features_in_, "normalisation": model.normalisation,
             "weights": member, "train_seconds": model.train_seconds_,
-            "package_version": __version__}
+            "package_version": package_version()}
     if model.name == "cnn":
         meta.update(history=model.history_, split_scores=model.split_scores_, best_epoch=model.best_epoch_)
 
@@ -120,7 +119,14 @@ def _restore(model: ProfileClassifier, meta: dict, blob: bytes) -> None:
     elif model.name == "cnn":
         import torch
 
-        state = torch.load(io.BytesIO(blob), weights_only=True, map_location="cpu")
+        try:
+            state = torch.load(io.BytesIO(blob), weights_only=True, map_location="cpu")
+        except Exception as exc:  # torch's own text advises weights_only=False: never do that here
+            raise DataFileError(f"weights member {meta['weights']!r} is not a plain tensor state dict "
+                                f"({type(exc).__name__}); it may hold Python objects, which mdaug never "
+                                "loads: retrain the model or use a trusted copy") from None
+        if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
+            raise DataFileError(f"weights member {meta['weights']!r} is not a state dict of tensors")
         net = model.build(len(model.classes_))
         net.load_state_dict(state)
         model.net_ = net.to(memory_format=torch.channels_last)

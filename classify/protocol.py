@@ -59,8 +59,9 @@ class SweepJob:
     n_boot: int
 
 
-def run_sweep_job(job: SweepJob) -> list[dict]:
-    """Build the sigma_P training set, train each model, score it on each test set."""
+def run_sweep_job(job: SweepJob, on_cell=None) -> list[dict]:
+    """Build the sigma_P training set, train each model, score it on each test set.
+    ``on_cell()`` is called after each model (one cell of the sweep's table)."""
     x, y = job.make_train(job.sigma_p, job.train_seed)
     rows = []
     for name in job.models:
@@ -83,6 +84,8 @@ def run_sweep_job(job: SweepJob) -> list[dict]:
                    "train_seconds": model.train_seconds_, "n_train": int(len(y)), "n_test": m["n"]}
             row.update({f"recall_{lab}": r for lab, r in recalls.items()})
             rows.append(row)
+        if on_cell is not None:
+            on_cell()
     return rows
 
 
@@ -103,10 +106,10 @@ class _CachedJob:
     key: str
 
 
-def _run_cached(c: _CachedJob) -> list[dict]:
+def _run_cached(c: _CachedJob, on_cell=None) -> list[dict]:
     from ..radar import atomic_write
 
-    rows = run_sweep_job(c.job)
+    rows = run_sweep_job(c.job, on_cell)
     payload = json.dumps({"key": c.key, "rows": rows}).encode()
     atomic_write(c.path, lambda fh: fh.write(payload))
     return rows
@@ -242,8 +245,10 @@ def sigma_p_sweep(make_train, test_sets: dict, sigma_ps=PUBLISHED_SIGMA_PS, mode
     cache_dir: folder for per-sigma_P results (resume); a cached job is reused only
     when its settings match, and ``make_train`` is identified by its ``cache_key``
     attribute (else its repr, which for a plain function changes between runs).
+    progress: a bar of the sweep's cells (sigma_P x model) with an ETA; None shows it
+    on a terminal (see :mod:`mdaug.radar.progress`).
     """
-    from tqdm.auto import tqdm
+    from ..radar.progress import progress_bar
 
     sigma_ps = [float(s) for s in sigma_ps]
     bad = [s for s in sigma_ps if not 0.0 <= s <= 1.0]
@@ -281,13 +286,15 @@ def sigma_p_sweep(make_train, test_sets: dict, sigma_ps=PUBLISHED_SIGMA_PS, mode
         todo.append((job.index, _CachedJob(job, path, key)))
     fn = run_sweep_job if cache_dir is None else _run_cached
     t0 = time.perf_counter()
-    mapper = map if executor is None else executor.map
-    bar = tqdm(total=len(todo), desc="sigma_P sweep", unit="sigma",
-               disable=(not progress) if progress is not None else None)
-    for (i, _), rows in zip(todo, mapper(fn, [j for _, j in todo])):
-        results[i] = rows
-        bar.update(1)
-    bar.close()
+    bar = progress_bar(total=len(todo) * len(models), desc="sigma_P sweep cells", unit="cell", progress=progress)
+    with bar:
+        if executor is None:  # serial: one tick per trained model
+            for i, job in todo:
+                results[i] = fn(job, lambda: bar.update(1))
+        else:  # workers: one tick per model as each sigma_P job comes back
+            for (i, _), rows in zip(todo, executor.map(fn, [j for _, j in todo])):
+                results[i] = rows
+                bar.update(len(models))
     settings = {"sigma_ps": sigma_ps, "models": list(models), "random_state": random_state,
                 "test_sets": {k: int(len(v[1])) for k, v in test_sets.items()}, "model_params": model_params,
                 "n_boot": n_boot, "seconds": time.perf_counter() - t0, "resumed_jobs": len(jobs) - len(todo)}

@@ -18,8 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import __version__
-from ..radar import DataFileError, ProfileSet, atomic_savez, load_profiles
+from ..radar import DataFileError, ProfileSet, atomic_savez, load_profiles, package_version
 from .augment import ModelAugmenter
 
 
@@ -42,18 +41,41 @@ def class_streams(seed, labels) -> dict[str, np.random.Generator]:
     return {lab: np.random.default_rng(ch) for lab, ch in zip(labels, children)}
 
 
+def dataset_nbytes(augmenters: list[ModelAugmenter], n_per_class: int) -> tuple[int, int]:
+    """(bytes, bytes per profile of every class): the peak memory of
+    :func:`make_dataset` (each class's batch plus the concatenated dataset)."""
+    per = 0
+    width = max(len(a.label) for a in augmenters)
+    for a in augmenters:
+        item = np.dtype(a.dtype).itemsize
+        per += 2 * a.radar.slice_length * item + 2 * (13 * a.n_engines + 2) * 8 + 4 * width + 8
+    return int(per) * int(n_per_class), int(per)
+
+
+def check_dataset_memory(augmenters: list[ModelAugmenter], n_per_class: int, what: str = "n_per_class") -> None:
+    """Refuse (ValueError naming ``what``) a dataset larger than the available memory."""
+    from ..radar.memory import check_memory
+
+    nbytes, per = dataset_nbytes(augmenters, n_per_class)
+    check_memory(nbytes, f"{what} {n_per_class:,}: {len(augmenters)} class(es) x {n_per_class:,} profiles "
+                         f"x {augmenters[0].radar.slice_length} bins", per, "per class")
+
+
 def make_dataset(augmenters: list[ModelAugmenter], n_per_class: int, seed: int,
                  progress: bool | None = None, extra_settings: dict | None = None) -> SyntheticDataset:
-    """n_per_class profiles from each augmenter, class by class, from one seed."""
+    """n_per_class profiles from each augmenter, class by class, from one seed.
+
+    Refuses (ValueError) a dataset that would not fit in the available memory."""
     labels = [a.label for a in augmenters]
     if len(set(labels)) != len(labels):
         raise ValueError(f"two augmenters share a class label: {labels}")
+    check_dataset_memory(augmenters, n_per_class)
     streams = class_streams(seed, labels)
     parts = [a.sample(n_per_class, streams[a.label], progress=progress) for a in augmenters]
     radar = augmenters[0].radar
     settings = {
         "seed": seed, "n_per_class": n_per_class, "classes": labels,
-        "radar": radar.to_dict(), "package_version": __version__, "simulated": True,
+        "radar": radar.to_dict(), "package_version": package_version(), "simulated": True,
         "per_class": {a.label: a.settings() for a in augmenters},
         **(extra_settings or {}),
     }

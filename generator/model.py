@@ -15,6 +15,25 @@ Precision: the carrier phase K R0 t reaches ~1000 rad, so it is always formed in
 float64 and reduced modulo 2 pi before anything is cast to float32; everything else
 (vibration terms, cos, FFT) may run in float32 (``dtype="float32"``), which is
 faster and stays within ~1e-5 of float64 (see tests/benchmarks/generator.py).
+
+Input ranges (:func:`check_model_inputs`; outside them f(x) refuses with a
+ValueError naming the parameter, its row and the range, instead of returning NaN
+or silently inaccurate profiles):
+
+* ``r0``: finite and > 0 (m);
+* ``|Gamma| <= 1e30`` (:data:`GAMMA_MAX`): the float32 spectrum of a 504-sample
+  chirp overflows (inf, then NaN bins) near 1e35;
+* ``|A| <= 1 m`` (:data:`AMPLITUDE_MAX`, about 500x the references' millimetres):
+  the phase excursion K A t then stays below ~330 rad, where float32 keeps it
+  to ~2e-5 rad (at A = 1e300 m it overflows float32);
+* ``|phi| <= 1e9 rad`` (:data:`PHASE_MAX`): phases are reduced modulo 2 pi in
+  float64 before any float32 cast, which is exact to ~|phi| x 3e-16 rad; a
+  float64 number near 1e16 is not even known to within 2 rad, so such a phase
+  cannot be reduced meaningfully (reduce it yourself first);
+* every term's frequency (w_a, w_b and the derived w_p = C_p |w_a + w_b|,
+  w_m = C_m |w_a - w_b|) at most the Nyquist frequency pi fs (6.28e5 rad/s at
+  200 kHz, :func:`nyquist_rad_s`): a faster vibration aliases in the sampled
+  chirp and f(x) would show it at a wrong offset.
 """
 from __future__ import annotations
 
@@ -30,10 +49,65 @@ from .params import IDX, N_PARAMS, validate_vectors
 TWO_PI = 2.0 * np.pi
 EDGE_POLICIES = ("warn", "pad", "error")
 CHUNK = 256  # rows per vectorised block
+GAMMA_MAX = 1e30
+AMPLITUDE_MAX = 1.0  # m
+PHASE_MAX = 1e9  # rad
+TERMS = ("a", "b", "p", "m")
+
+
+def nyquist_rad_s(radar: RadarConfig = RadarConfig()) -> float:
+    """Highest vibration frequency the sampled chirp shows without aliasing: pi fs (rad/s)."""
+    return float(np.pi * radar.sample_rate_hz)
+
+
+def check_r0(r0, n: int, what: str = "r0") -> np.ndarray:
+    """Model ranges (n,) float64 from a scalar or (n,) array: finite and > 0 m."""
+    arr = np.asarray(r0, dtype=np.float64)
+    try:
+        arr = np.broadcast_to(arr, (n,))
+    except ValueError:
+        raise ValueError(f"{what}: expected a scalar or {n} model ranges (one per vector), got shape "
+                         f"{arr.shape}") from None
+    bad = ~(np.isfinite(arr) & (arr > 0))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{what} = {float(arr[i])} (row {i}); expected a finite model range > 0 m")
+    return arr
+
+
+def check_model_inputs(x: np.ndarray, radar: RadarConfig = RadarConfig(), what: str = "parameter vector") -> None:
+    """Refuse vectors (N, 13 E) outside the ranges f(x) computes faithfully (see the
+    module doc): |Gamma| <= 1e30, |A| <= 1 m, |phi| <= 1e9 rad, every term frequency
+    <= pi fs. Raises ValueError naming the parameter, its row and the range."""
+    from .params import AMPLITUDES, PHASES, param_labels
+
+    n_eng = x.shape[1] // N_PARAMS
+    labels = param_labels(n_eng)
+    for cols, limit, expect in (
+            ((IDX["Gamma"],), GAMMA_MAX, f"expected |Gamma| <= {GAMMA_MAX:g} (float32 spectra overflow near 1e35)"),
+            (AMPLITUDES, AMPLITUDE_MAX, f"expected |A| <= {AMPLITUDE_MAX:g} m (vibration amplitudes are mm; "
+                                        "beyond 1 m the phase excursion K A t loses float32 precision)"),
+            (PHASES, PHASE_MAX, f"expected |phi| <= {PHASE_MAX:g} rad (phases are reduced modulo 2 pi in float64; "
+                                "beyond that the reduction loses more than 1e-6 rad, and near 1e16 rad a float64 "
+                                "phase is not known to within 2 rad: reduce it modulo 2 pi first)")):
+        idx = [k * N_PARAMS + c for k in range(n_eng) for c in cols]
+        bad = np.abs(x[:, idx]) > limit
+        if bad.any():
+            row, j = np.argwhere(bad)[0]
+            raise ValueError(f"{what}: {labels[idx[j]]} = {x[row, idx[j]]:.6g} in row {row}; {expect}")
+    _, w, _ = vibration_terms(x)
+    bad = ~(np.abs(w) <= nyquist_rad_s(radar))
+    if bad.any():
+        row, eng, term = np.argwhere(bad)[0]
+        name = {"a": "w_a", "b": "w_b", "p": "w_p = C_p |w_a + w_b|", "m": "w_m = C_m |w_a - w_b|"}[TERMS[term]]
+        raise ValueError(f"{what}: {name} of engine {eng} = {w[row, eng, term]:.6g} rad/s in row {row}; expected "
+                         f"at most the Nyquist frequency pi fs = {nyquist_rad_s(radar):.6g} rad/s (a faster "
+                         "vibration aliases in the sampled chirp)")
 
 
 def _wrap(phase: np.ndarray) -> np.ndarray:
-    """Reduce float64 phases to [-pi, pi] (exact enough: |phase| < 1e6 rad here)."""
+    """Reduce float64 phases to [-pi, pi] (error ~|phase| x 3e-16 rad: callers keep
+    |phase| <= PHASE_MAX = 1e9 rad, see :func:`check_model_inputs`)."""
     return phase - TWO_PI * np.rint(phase * (1.0 / TWO_PI))
 
 
@@ -55,8 +129,9 @@ def if_signal(x, radar: RadarConfig = RadarConfig(), *, r0=None, phase_offsets=N
               bracket_time=None, dtype="float64", carrier_phase=None) -> np.ndarray:
     """IF samples of a batch of parameter vectors.
 
-    x: (N, 13 E) or (13 E,) parameter vectors; r0: model range in m, scalar or (N,)
-    (default ``radar.model_range_m``); phase_offsets: (N, E, 4) rad added to the
+    x: (N, 13 E) or (13 E,) parameter vectors (within the ranges of the module doc,
+    else ValueError); r0: model range in m, scalar or (N,), finite and > 0 (default
+    ``radar.model_range_m``); phase_offsets: (N, E, 4) rad added to the
     term phases (used for ramp-to-ramp advance); bracket_time: None for the model as
     published (the range bracket is multiplied by t), or a constant time in s that
     freezes it (the Jacobi-Anger case, used in tests); carrier_phase: None, or rad,
@@ -66,18 +141,25 @@ def if_signal(x, radar: RadarConfig = RadarConfig(), *, r0=None, phase_offsets=N
     Returns (N, N_s) real samples in ``dtype``.
     """
     x = validate_vectors(x, physical=False)
+    check_model_inputs(x, radar)
     n = x.shape[0]
     dt = np.dtype(dtype)
     t = np.arange(radar.samples_per_chirp) / radar.sample_rate_hz
     k = radar.model_k
-    r0 = np.broadcast_to(np.asarray(radar.model_range_m if r0 is None else r0, dtype=np.float64), (n,))
+    r0 = check_r0(radar.model_range_m if r0 is None else r0, n)
     carrier = k * r0[:, None] * t[None, :]
     if carrier_phase is not None:
-        carrier = carrier + np.broadcast_to(np.asarray(carrier_phase, dtype=np.float64), (n,))[:, None]
+        cp = np.broadcast_to(np.asarray(carrier_phase, dtype=np.float64), (n,))
+        if not np.all(np.abs(cp) <= PHASE_MAX):
+            raise ValueError(f"carrier_phase: expected finite phases with |phase| <= {PHASE_MAX:g} rad, got "
+                             f"{cp[~(np.abs(cp) <= PHASE_MAX)][0]!r}")
+        carrier = carrier + cp[:, None]
     carrier = _wrap(carrier).astype(dt)  # (N, Ns), reduced in float64
     amp, w, phi = vibration_terms(x)
     if phase_offsets is not None:
         phi = phi + phase_offsets
+        if not np.all(np.abs(phi) <= PHASE_MAX):
+            raise ValueError(f"phase_offsets: expected finite offsets keeping |phase| <= {PHASE_MAX:g} rad")
     bracket_t = t if bracket_time is None else np.full_like(t, float(bracket_time))
     # w t + phi for every term as one (N*E*4, 2) @ (2, Ns) product: far faster than
     # a broadcast; phases wrapped first so float32 keeps its resolution.
@@ -145,7 +227,7 @@ def profiles(x, radar: RadarConfig = RadarConfig(), *, r0=None, n_ramps: int = 1
         raise ValueError(f"on_edge must be one of {EDGE_POLICIES}, got {on_edge!r}")
     x = validate_vectors(x, physical=False)
     n = x.shape[0]
-    r0 = np.broadcast_to(np.asarray(radar.model_range_m if r0 is None else r0, dtype=np.float64), (n,))
+    r0 = check_r0(radar.model_range_m if r0 is None else r0, n)
     windows = np.empty((n, radar.slice_length), dtype=dtype)
     peak = np.empty(n, dtype=np.int64)
     n_missing = np.empty(n, dtype=np.int64)

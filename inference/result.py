@@ -20,8 +20,6 @@ NetCDF layout (``.save`` / ``.load``):
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import warnings
 from pathlib import Path
 
@@ -294,20 +292,14 @@ class CalibrationResult:
 
     # ---- files ---------------------------------------------------------------------------
     def save(self, path) -> Path:
-        """Write NetCDF atomically (a temporary file in the same folder, then rename)."""
-        from ..radar.io import check_writable
+        """Write NetCDF atomically (a temporary file in the same folder, then rename),
+        with the usual file mode (0666 minus the umask), like every other output."""
+        from ..radar.io import atomic_path
 
-        path = check_writable(path)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        os.close(fd)
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                self.idata.to_netcdf(tmp, engine="h5netcdf")
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
+        path = Path(path)
+        with atomic_path(path) as tmp, warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            self.idata.to_netcdf(str(tmp), engine="h5netcdf")
         return path
 
     @classmethod

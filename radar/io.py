@@ -6,10 +6,15 @@ or MATLAB .mat with the same variable names. Every error names the file and fiel
 """
 from __future__ import annotations
 
+import contextlib
 import csv
+import glob
 import json
 import os
+import re
+import socket
 import tempfile
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -47,6 +52,18 @@ class ProfileSet:
         raw = self.extra.get("settings")
         return {} if raw is None else json.loads(str(raw))
 
+    def check_no_zero_rows(self, label: str | None = None) -> "ProfileSet":
+        """Refuse all-zero profiles (of class ``label``, or any), naming the file and rows."""
+        rows = zero_rows(self.profiles if label is None else self.profiles[self.labels == label])
+        if rows.size:
+            if label is not None:
+                rows = np.flatnonzero(self.labels == label)[rows]
+            shown = ", ".join(map(str, rows[:8].tolist())) + (", ..." if rows.size > 8 else "")
+            raise DataFileError(f"{self.source}: field 'profiles': {rows.size} of {len(self)} profile(s) "
+                                f"are all zeros (rows {shown}); an all-zero profile has no signature, "
+                                "remove those rows")
+        return self
+
     def select(self, label: str) -> np.ndarray:
         """Profiles (n, L) of one class; error naming the file when absent."""
         mask = self.labels == label
@@ -54,6 +71,12 @@ class ProfileSet:
             raise DataFileError(f"{self.source}: field 'labels' holds no profile of class "
                                 f"{label!r} (classes present: {self.classes})")
         return self.profiles[mask]
+
+
+def zero_rows(profiles) -> np.ndarray:
+    """Indices of the rows of ``profiles`` (N, L) that are all zeros."""
+    x = np.asarray(profiles)
+    return np.flatnonzero(~np.any(x.reshape(x.shape[0], -1) != 0, axis=1))
 
 
 def _umask() -> int:
@@ -82,25 +105,111 @@ def check_outputs(*paths) -> None:
             check_writable(path)
 
 
-def atomic_write(path, write) -> Path:
-    """Call ``write(fileobj)`` on a temporary file beside ``path``, then rename it.
+PART_SUFFIX = ".part"
+STALE_SECONDS = 3600.0
+"""A part file whose writer cannot be checked (another host, or an older mdaug that
+did not record its pid) counts as stale after this many seconds."""
 
-    The target appears only when complete; on any error nothing is left behind.
+
+def _host() -> str:
+    return re.sub(r"[^A-Za-z0-9_-]", "_", socket.gethostname())[:40] or "host"
+
+
+def _part_prefix(path: Path) -> str:
+    return f".{path.name}."
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True  # exists, owned by someone else
+    try:  # a killed but not yet reaped process is a zombie: its writing is over
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
+
+
+def stale_parts(path) -> list[Path]:
+    """Temporary files of earlier writes of ``path`` whose writer is gone.
+
+    :func:`atomic_write` names its temporary file ``.NAME.PID@HOST.XXXXXXXX.part``
+    beside the target; one is left behind only when the writer was killed outright
+    (SIGKILL, power loss). It is stale when its PID is no longer running on this
+    host, or, when that cannot be checked (another host, an older file without
+    PID), when it is older than :data:`STALE_SECONDS`.
+    """
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    prefix = _part_prefix(path)
+    pattern = re.compile(r"^(\d+)@([A-Za-z0-9_-]+)\.[A-Za-z0-9_]+$")
+    host, now, out = _host(), time.time(), []
+    for name in glob.glob(glob.escape(prefix) + "*" + PART_SUFFIX, root_dir=parent):
+        middle = name[len(prefix): -len(PART_SUFFIX)]
+        part = parent / name
+        m = pattern.match(middle)
+        try:
+            if m and m.group(2) == host:
+                stale = int(m.group(1)) != os.getpid() and not _pid_alive(int(m.group(1)))
+            else:
+                stale = now - part.stat().st_mtime > STALE_SECONDS
+        except OSError:
+            continue
+        if stale:
+            out.append(part)
+    return out
+
+
+def remove_stale_parts(path) -> list[Path]:
+    """Delete the :func:`stale_parts` of ``path``; returns what was removed."""
+    removed = []
+    for part in stale_parts(path):
+        with contextlib.suppress(OSError):
+            part.unlink()
+            removed.append(part)
+    return removed
+
+
+@contextlib.contextmanager
+def atomic_path(path):
+    """Yield a temporary path beside ``path`` to write by name; on success it gets the
+    usual file mode (0666 minus the umask) and is renamed onto ``path``.
+
+    The target appears only when complete; on any error (or KeyboardInterrupt) the
+    temporary file is removed. Stale temporary files of earlier, killed writes of
+    the same target are removed first (:func:`stale_parts`).
     """
     path = check_writable(path)
     parent = path.parent if str(path.parent) else Path(".")
+    remove_stale_parts(path)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=parent)
+        fd, tmp = tempfile.mkstemp(prefix=f"{_part_prefix(path)}{os.getpid()}@{_host()}.",
+                                   suffix=PART_SUFFIX, dir=parent)
     except OSError as exc:
         raise DataFileError(f"{path}: cannot write ({exc.strerror})") from exc
+    os.close(fd)
     try:
-        with os.fdopen(fd, "wb") as fh:
-            write(fh)
+        yield Path(tmp)
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600 files; give the usual mode
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def atomic_write(path, write) -> Path:
+    """Call ``write(fileobj)`` on a temporary file beside ``path``, then rename it.
+
+    The target appears only when complete; on any error nothing is left behind
+    (see :func:`atomic_path`).
+    """
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            write(fh)
     return path
 
 

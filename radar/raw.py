@@ -47,12 +47,13 @@ def check_cube(cube, source: str, radar: RadarConfig = RadarConfig(), field: str
     if arr.ndim not in (3, 4):
         raise DataFileError(f"{source}: field {field!r} has rank {arr.ndim} (shape {arr.shape}); "
                             f"expected {RAMPS_FIELD_NOTE}")
+    if np.issubdtype(arr.dtype, np.floating) and not np.all(np.isfinite(arr)):
+        idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])  # in the file's own shape
+        raise DataFileError(f"{source}: field {field!r} holds NaN or inf (first at index {idx} of shape "
+                            f"{arr.shape})")
     if arr.ndim == 3:
         arr = arr[:, None]
     f, _, a, s = arr.shape
-    if np.issubdtype(arr.dtype, np.floating) and not np.all(np.isfinite(arr)):
-        idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
-        raise DataFileError(f"{source}: field {field!r} holds NaN or inf (first at index {idx})")
     if f < radar.mti_depth + 1:
         raise DataFileError(f"{source}: field {field!r} has {f} frame(s); the MTI needs at least "
                             f"mti_depth + 1 = {radar.mti_depth + 1}")

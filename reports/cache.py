@@ -20,12 +20,21 @@ def settings_key(*parts) -> str:
 
 
 class StageCache:
-    def __init__(self, folder: Path, log=print):
+    """``listener``: None, or an object with ``stage_started(name)`` and
+    ``stage_finished(name, seconds, cached)`` (the command line's study progress bar);
+    it may be set after construction."""
+
+    def __init__(self, folder: Path, log=print, listener=None):
         self.folder = Path(folder) / "stages"
         self.folder.mkdir(parents=True, exist_ok=True)
         self.log = log
+        self.listener = listener
         self.timings: dict[str, float] = {}
         self.resumed: list[str] = []
+
+    def _notify(self, event: str, *args) -> None:
+        if self.listener is not None:
+            getattr(self.listener, event)(*args)
 
     def path(self, name: str, suffix: str = ".json") -> Path:
         return self.folder / f"{name}{suffix}"
@@ -49,6 +58,7 @@ class StageCache:
         self.timings[name] = seconds
         text = json.dumps({"key": key, "seconds": seconds, "result": result}, indent=1)
         atomic_write(self.path(name), lambda fh: fh.write(text.encode()))
+        self._notify("stage_finished", name, seconds, False)
         return result
 
     def run(self, name: str, key: str, compute):
@@ -61,8 +71,10 @@ class StageCache:
             self.timings[name] = stored["seconds"]
             self.resumed.append(name)
             self.log(f"[{name}] cached ({stored['seconds']:.1f} s when computed)")
+            self._notify("stage_finished", name, stored["seconds"], True)
             return stored["result"]
         self.log(f"[{name}] running ...")
+        self._notify("stage_started", name)
         t0 = time.perf_counter()
         result = compute()
         seconds = time.perf_counter() - t0

@@ -1,0 +1,78 @@
+"""Progress bars for long steps, and the one switch that silences them.
+
+Every step longer than a few seconds (calibration, CNN epochs, sweep cells, study
+stages) draws a tqdm bar with an ETA on stderr, through :func:`progress_bar`. A bar
+is drawn only when
+
+* stderr is a terminal (never in a log file, a pipe or a test), and
+* quiet is off: ``mdaug --quiet`` (or the environment variable ``MDAUG_QUIET=1``,
+  which worker processes inherit) silences every bar and the status chatter.
+
+Library functions take ``progress=None`` (automatic: the rule above), ``False``
+(never) or ``True`` (even when stderr is not a terminal; still silenced by quiet).
+"""
+from __future__ import annotations
+
+import os
+import sys
+
+QUIET_ENV = "MDAUG_QUIET"
+_TRUE = ("1", "true", "yes", "on")
+
+
+def is_quiet() -> bool:
+    """Whether progress and status chatter are silenced (``MDAUG_QUIET``)."""
+    return os.environ.get(QUIET_ENV, "").strip().lower() in _TRUE
+
+
+def set_quiet(quiet: bool = True) -> bool:
+    """Switch quiet on or off for this process and the workers it starts; returns
+    the previous setting."""
+    before = is_quiet()
+    os.environ[QUIET_ENV] = "1" if quiet else "0"
+    return before
+
+
+def _isatty(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):  # no isatty, or a closed stream
+        return False
+
+
+def progress_enabled(progress: bool | None = None, stream=None) -> bool:
+    """Whether to draw a bar: ``progress`` None = stderr is a terminal, True = always,
+    False = never; quiet wins over all three."""
+    if is_quiet() or progress is False:
+        return False
+    if progress is True:
+        return True
+    return _isatty(sys.stderr if stream is None else stream)
+
+
+def progress_bar(iterable=None, *, total=None, desc: str | None = None, unit: str = "it",
+                 progress: bool | None = None, leave: bool | None = None, **kw):
+    """A tqdm bar on stderr (elapsed, rate and ETA), disabled by :func:`progress_enabled`.
+
+    Same interface as ``tqdm.tqdm``; a disabled bar still iterates and accepts
+    ``update`` / ``set_postfix``, so callers need no branches. ``leave`` None keeps
+    an outermost bar on screen when it ends and removes a nested one.
+    """
+    from tqdm import tqdm
+
+    return tqdm(iterable, total=total, desc=desc, unit=unit, file=sys.stderr, leave=leave,
+                disable=not progress_enabled(progress), dynamic_ncols=True, **kw)
+
+
+def echo(message: str = "", *, err: bool = False, force: bool = False) -> None:
+    """Print a status line without breaking an active bar; silent when quiet
+    (unless ``force``: results and warnings are always printed)."""
+    if is_quiet() and not force:
+        return
+    stream = sys.stderr if err else sys.stdout
+    from tqdm import tqdm
+
+    if getattr(tqdm, "_instances", None):
+        tqdm.write(message, file=stream)
+    else:
+        print(message, file=stream, flush=True)
