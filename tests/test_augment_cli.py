@@ -41,8 +41,8 @@ def test_same_seed_same_file_bytes(tmp_path):
 
 @pytest.mark.parametrize("args, match", [
     (["--classes", "HELI,BLIMP"], "unknown class 'BLIMP'"),
-    (["--sigma-p", "-0.1"], "sigma_p must be"),
-    (["--n-per-class", "0"], "--n-per-class must be a positive integer"),
+    (["--sigma-p", "-0.1"], "argument --sigma-p: expected a number in [0, 1]"),
+    (["--n-per-class", "0"], "argument --n-per-class: expected a positive integer"),
 ])
 def test_augment_errors(tmp_path, capsys, args, match):
     out = tmp_path / "x.npz"

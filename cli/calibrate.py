@@ -1,0 +1,159 @@
+"""``mdaug calibrate``: a class's posterior from measured profiles (nlopt fit + sampler).
+
+Exit status: 0 when the sampler converged, 3 when it did not (the posterior is still
+written, flagged not converged in the file and on stderr) unless
+``--allow-unconverged`` is given, 2 on bad input, 130 when interrupted (the chain
+checkpoint is kept: the same command resumes).
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from .common import add_verb, info, positive_int, result, seed_int, warn
+
+EXIT_NOT_CONVERGED = 3
+
+
+def engines_arg(text: str):
+    if text == "auto":
+        return "auto"
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer or 'auto', got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer or 'auto', got {value}")
+    return value
+
+
+def walkers_arg(text: str) -> int:
+    from .common import integer
+
+    return integer(text, 2, "an integer >= 2 (0 is not allowed here: leave the option out for auto)")
+
+
+def particles_arg(text: str) -> int:
+    from .common import integer
+
+    return integer(text, 2, "an integer >= 2 (leave the option out for auto)")
+
+
+def _backend(args) -> Path:
+    return args.backend if args.backend is not None else Path(f"{args.out}.chain.h5")
+
+
+def run_calibrate(args) -> int:
+    import numpy as np
+
+    from ..inference.calibrate import calibrate
+    from ..inference.settings import CalibrationSettings
+    from ..radar import DataFileError, RadarConfig, check_outputs, load_profiles
+    from ..radar.progress import progress_enabled
+
+    backend = _backend(args)
+    check_outputs(args.out, args.corner, args.trace, backend)
+    radar = RadarConfig()
+    data = load_profiles(args.measured)
+    cls = args.class_name.upper() if args.class_name.upper() in data.classes else args.class_name
+    profiles = data.select(cls)  # names the file when the class is absent
+    data.check_no_zero_rows(cls)
+    if profiles.shape[1] != radar.slice_length:
+        raise DataFileError(f"{args.measured}: field 'profiles' has {profiles.shape[1]}-bin profiles; calibration "
+                            f"takes {radar.slice_length}-bin peak-centred signatures (run 'mdaug process' on "
+                            "whole MTI profiles first)")
+    if np.any(profiles < 0):
+        raise DataFileError(f"{args.measured}: field 'profiles' holds negative values; calibration takes linear "
+                            "magnitudes (>= 0), not dB")
+    base = CalibrationSettings.quick() if args.quick else CalibrationSettings()
+    overrides = {k: v for k, v in {"max_steps": args.max_steps, "fit_budget": args.fit_budget,
+                                   "n_starts": args.starts, "n_walkers": args.walkers,
+                                   "fit_algorithm": args.fit_algorithm, "normalisation": args.normalisation,
+                                   "sampler": args.sampler, "n_particles": args.particles}.items()
+                 if v is not None}
+    settings = base.replace(threads=args.threads, progress=progress_enabled(),
+                            range_offset=not args.no_range_offset, **overrides)
+    info(f"calibrating {args.class_name.upper()} from {len(profiles)} profile(s) of {args.measured} "
+         f"(engines {args.engines or 'reference'}, seed {args.seed}; chain checkpoint {backend})")
+    res = calibrate(profiles, args.class_name.upper(), engines=args.engines, settings=settings,
+                    random_state=args.seed, backend_path=backend)
+    res.save(args.out)
+    result(res.report())
+    result(f"wrote {args.out}")
+    if args.corner is not None:
+        res.plot_corner(args.corner)
+        result(f"wrote {args.corner}")
+    if args.trace is not None:
+        res.plot_trace(args.trace)
+        result(f"wrote {args.trace}")
+    if args.backend is None:  # the default checkpoint is captured in the NetCDF now
+        for p in backend.parent.glob(backend.name + "*"):
+            p.unlink()
+    if not res.converged:
+        warn("calibrate", f"the chain did not converge ({res.diagnostics['reason']}); {args.out} is flagged "
+                          "not converged")
+        return 0 if args.allow_unconverged else EXIT_NOT_CONVERGED
+    return 0
+
+
+def _interrupted(args) -> str:
+    return f"the chain checkpoint {_backend(args)} is kept; run the same command again to resume"
+
+
+def add_calibrate(sub, parents, help):
+    from ..inference.settings import FIT_ALGORITHMS, SAMPLERS, CalibrationSettings
+    from ..radar.profiles import NORMALISATIONS
+
+    d, q = CalibrationSettings(), CalibrationSettings.quick()
+    p = add_verb(sub, "calibrate", parents, help=help, interrupted=_interrupted,
+                 description="Fit the class's parameter vector to measured profiles (nlopt, several starts) and "
+                             "sample its posterior (emcee until 50 autocorrelation times, or tempered SMC with "
+                             "--sampler smc). Exit status 3 when the sampler did not converge (the posterior is "
+                             "still written, flagged); an interrupted run resumes from its chain checkpoint.")
+    p.add_argument("measured", type=Path, help="measured profiles (NPZ, CSV or .mat with profiles and labels)")
+    p.add_argument("--class", dest="class_name", required=True, metavar="CLASS",
+                   help="class label to calibrate (e.g. HELI); its reference gives the priors")
+    p.add_argument("--out", type=Path, required=True, help="posterior NetCDF (arviz InferenceData)")
+    p.add_argument("--engines", type=engines_arg, default=None, metavar="N|auto",
+                   help="engines to fit: a count, or auto (chosen by LOO among 1, 2, 4) (default: the "
+                        "reference's count)")
+    p.add_argument("--seed", type=seed_int, default=0, help="random seed of fit and sampler (default: %(default)s)")
+    p.add_argument("--corner", type=Path, default=None, help="also write a corner plot PNG (default: none)")
+    p.add_argument("--trace", type=Path, default=None, help="also write a trace plot PNG (default: none)")
+    p.add_argument("--backend", type=Path, default=None,
+                   help="HDF5 chain checkpoint; an interrupted run resumes from it (default: OUT.chain.h5, "
+                        "removed after success)")
+    p.add_argument("--allow-unconverged", action="store_true",
+                   help="exit 0 even when the sampler did not converge")
+    g = p.add_argument_group("budget and sampler")
+    g.add_argument("--quick", action="store_true",
+                   help="short run of seconds, for a first look (usually not converged)")
+    g.add_argument("--sampler", choices=SAMPLERS, default=None,
+                   help="emcee: ensemble from the fit, run to 50 tau; smc: tempered SMC from the prior with "
+                        f"mode jumps, for multimodal posteriors, gives the evidence (default: {d.sampler})")
+    g.add_argument("--max-steps", type=positive_int, default=None, metavar="N",
+                   help=f"emcee step budget, steps per walker (default: {d.max_steps}; --quick: {q.max_steps})")
+    g.add_argument("--walkers", type=walkers_arg, default=None, metavar="N",
+                   help="emcee walkers (default: 3 x the number of sampled coordinates, at least 32; "
+                        f"--quick: {q.n_walkers})")
+    g.add_argument("--particles", type=particles_arg, default=None, metavar="N",
+                   help="SMC particles (default: max(500, 40 x the number of sampled coordinates))")
+    g.add_argument("--starts", type=positive_int, default=None, metavar="N",
+                   help=f"independent global fit starts (default: {d.n_starts}; --quick: {q.n_starts})")
+    g.add_argument("--fit-budget", type=positive_int, default=None, metavar="EVALS",
+                   help=f"objective evaluations per global fit start (default: {d.fit_budget}; --quick: "
+                        f"{q.fit_budget})")
+    g.add_argument("--fit-algorithm", choices=FIT_ALGORITHMS, default=None, metavar="NAME",
+                   help=f"nlopt global algorithm, one of {', '.join(FIT_ALGORITHMS)} (default: {d.fit_algorithm})")
+    g = p.add_argument_group("model")
+    g.add_argument("--normalisation", choices=NORMALISATIONS, default=None,
+                   help=f"normalisation of measured and model profiles (default: {d.normalisation})")
+    g.add_argument("--no-range-offset", action="store_true",
+                   help="do not fit a per-measurement offset of the tone (fix it at 0 bins)")
+    p.set_defaults(func=run_calibrate)
+    return p
+
+
+VERBS = {
+    "calibrate": ("calibrate a class from measured profiles (fit + posterior)", add_calibrate),
+}

@@ -1,0 +1,316 @@
+"""Classifier verbs: ``mdaug train``, ``evaluate``, ``sweep`` (the published sigma_P
+protocol) and ``baseline`` (tsaug).
+
+The sweep builds its synthetic training sets with mdaug.generator
+(:class:`SyntheticTrainSet`); mdaug.classify itself only trains on arrays.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from .common import (add_classifier_options, add_nuisance_options, add_verb, check_out_folder,
+                     check_training_memory, class_list, count_2, csv_list, info, load_profile_file, model_list,
+                     model_params, nonneg_int, nothing_written, positive_int, result, seed_int, sigma_list)
+
+CNN_BINS = 400  # the CNN's 1 x 20 x 20 input
+
+
+def _paths(text: str) -> list[Path]:
+    return [Path(t) for t in csv_list(text)]
+
+
+def _check_test(model, test, path):
+    x = model.check_input(test.profiles, source=f"{path}: field 'profiles'")
+    y = model.check_labels(test.labels, source=f"{path}: field 'labels'")
+    return x, y
+
+
+# ---- train ------------------------------------------------------------------------------------
+def run_train(args) -> int:
+    from ..classify.models import make_classifier
+    from ..classify.persist import save_model
+    from ..radar import DataFileError, check_writable
+
+    check_writable(args.out)
+    cnn = args.model == "cnn"
+    data = load_profile_file(args.data, length=CNN_BINS if cnn else None, why="the CNN (1 x 20 x 20 input)")
+    if len(data.classes) < 2:
+        raise DataFileError(f"{args.data}: field 'labels' holds only class(es) {data.classes}; training needs "
+                            "at least 2")
+    model = make_classifier(args.model, random_state=args.seed, **model_params(args, args.model))
+    info(f"training {args.model} on {len(data)} profiles x {data.profiles.shape[1]} bins "
+         f"({', '.join(data.classes)}) from {args.data}")
+    model.fit(data.profiles, data.labels)
+    save_model(model, args.out)
+    result(f"trained in {model.train_seconds_:.1f} s; wrote {args.out}")
+    if cnn:
+        s = model.split_scores_
+        result(f"best epoch {s['best_epoch']}/{s['epochs_run']}: validation accuracy {s['val_accuracy']:.3f}; "
+               f"held-out 10% split ({s['n_test']} profiles) accuracy {s['test_accuracy']:.3f}")
+    return 0
+
+
+def add_train(sub, parents, help):
+    from ..classify.models import CLASSIFIERS
+
+    p = add_verb(sub, "train", parents, help=help, interrupted=nothing_written,
+                 description="Train a classifier on profiles + labels (NPZ, CSV or .mat) and save it as a model "
+                             "file (a ZIP that loads without executing code).")
+    p.add_argument("data", type=Path, help="training profiles (NPZ, CSV or .mat with profiles + labels)")
+    p.add_argument("--model", choices=tuple(CLASSIFIERS), required=True,
+                   help="svm, naive Bayes (nb), XGBoost (xgb) or the CNN of SPEC section 6 (400-bin profiles)")
+    p.add_argument("--out", type=Path, required=True, help="model file to write (.zip)")
+    p.add_argument("--seed", type=seed_int, default=0, help="seed of the model and its splits (default: %(default)s)")
+    add_classifier_options(p)
+    p.set_defaults(func=run_train)
+    return p
+
+
+# ---- evaluate ---------------------------------------------------------------------------------
+def run_evaluate(args) -> int:
+    from ..classify.metrics import evaluate, format_metrics, plot_confusion
+    from ..classify.persist import load_model
+    from ..radar import atomic_write, check_outputs
+
+    check_outputs(args.json, args.plot)
+    model = load_model(args.model)
+    test = load_profile_file(args.test)
+    x, y = _check_test(model, test, args.test)
+    m = evaluate(y, model.predict(x), labels=model.classes_.tolist(), n_boot=args.n_boot, random_state=args.seed)
+    result(f"{model.name} model {args.model} on {args.test}")
+    result(format_metrics(m))
+    if args.json is not None:
+        payload = json.dumps({**m, "model": str(args.model), "test": str(args.test), "kind": model.name},
+                             indent=1).encode()
+        atomic_write(args.json, lambda fh: fh.write(payload))
+        result(f"wrote {args.json}")
+    if args.plot is not None:
+        import matplotlib.pyplot as plt
+
+        fig = plot_confusion(m, title=f"{model.name} on {Path(args.test).name}: accuracy {m['accuracy']:.1%}")
+        try:
+            atomic_write(args.plot, lambda fh: fig.savefig(fh, format="png", dpi=110))
+        finally:
+            plt.close(fig)
+        result(f"wrote {args.plot}")
+    return 0
+
+
+def add_evaluate(sub, parents, help):
+    p = add_verb(sub, "evaluate", parents, help=help, interrupted=nothing_written,
+                 description="Accuracy, balanced accuracy, per-class precision and recall, the confusion matrix "
+                             "and bootstrap 95% intervals of a trained model on a labelled test file.")
+    p.add_argument("model", type=Path, help="model file written by 'mdaug train' or 'mdaug baseline'")
+    p.add_argument("test", type=Path, help="test profiles (NPZ, CSV or .mat with profiles + labels)")
+    p.add_argument("--json", type=Path, default=None, help="also write the metrics as JSON (default: none)")
+    p.add_argument("--plot", type=Path, default=None, help="also write the confusion matrix as PNG (default: none)")
+    p.add_argument("--n-boot", type=nonneg_int, default=1000, metavar="N",
+                   help="bootstrap resamples of the intervals, 0 = no intervals (default: %(default)s)")
+    p.add_argument("--seed", type=seed_int, default=0, help="bootstrap seed (default: %(default)s)")
+    p.set_defaults(func=run_evaluate)
+    return p
+
+
+# ---- sweep ------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SyntheticTrainSet:
+    """Picklable ``make_train(sigma_p, seed) -> (X, y)`` for the sweep: sigma_P sets
+    of ``classes`` with the given nuisances (``n_per_class`` profiles per class)."""
+
+    classes: tuple
+    n_per_class: int
+    phases: str = "relative"
+    range_jitter_bins: float = 0.0
+    n_ramps: int = 1
+    normalisation: str = "peak"
+    dtype: str = "float32"
+    sign_policy: str = "reflect"
+
+    @property
+    def cache_key(self) -> str:
+        return json.dumps(asdict(self), sort_keys=True)
+
+    def __call__(self, sigma_p: float, seed: int):
+        from ..generator import Nuisance, SigmaPAugmenter, make_dataset
+
+        nuisance = Nuisance(phases=self.phases, range_jitter_bins=self.range_jitter_bins, n_ramps=self.n_ramps)
+        augs = [SigmaPAugmenter(c, sigma_p, sign_policy=self.sign_policy, nuisance=nuisance,
+                                normalisation=self.normalisation, dtype=self.dtype) for c in self.classes]
+        ds = make_dataset(augs, self.n_per_class, seed, progress=False)
+        return ds.profiles, ds.labels
+
+
+def run_sweep(args) -> int:
+    from ..classify.protocol import sigma_p_sweep
+    from ..generator import load_reference
+    from ..radar import DataFileError, RadarConfig, atomic_write
+
+    out = check_out_folder(args.out)
+    for c in args.classes:
+        load_reference(c)  # unknown class: fail before any work
+    check_training_memory(2 * args.n_per_class, "--n-per-class", args.n_per_class, len(args.classes))
+    length = RadarConfig().slice_length
+    tests = {}
+    for path in args.test:
+        ps = load_profile_file(path, length=length, why="the synthetic training set (400-bin signatures)")
+        unknown = sorted(set(ps.classes) - set(args.classes))
+        if unknown:
+            raise DataFileError(f"{path}: field 'labels' holds classes {unknown} that are not trained "
+                                f"(--classes {','.join(args.classes)})")
+        name = path.stem
+        if name in tests:
+            raise ValueError(f"--test: two test files share the name {name!r}; rename one")
+        tests[name] = (ps.profiles, ps.labels)
+    make_train = SyntheticTrainSet(tuple(args.classes), args.n_per_class, phases=args.phases,
+                                   range_jitter_bins=args.range_jitter, n_ramps=args.ramps,
+                                   normalisation=args.normalisation, dtype=args.dtype, sign_policy=args.sign_policy)
+    params = {m: model_params(args, m) for m in args.models}
+    out.mkdir(parents=True, exist_ok=True)
+    executor = None
+    if args.workers > 1:
+        from concurrent.futures import ProcessPoolExecutor
+
+        executor = ProcessPoolExecutor(args.workers)
+    info(f"sweep: {len(args.sigma_p)} sigma_P x {len(args.models)} models, {2 * args.n_per_class} training "
+         f"profiles each, tests {', '.join(f'{k} ({len(v[1])})' for k, v in tests.items())}")
+    try:
+        res = sigma_p_sweep(make_train, tests, sigma_ps=args.sigma_p, models=args.models, random_state=args.seed,
+                            executor=executor, model_params=params, n_boot=args.n_boot,
+                            cache_dir=None if args.no_resume else out / "jobs")
+    finally:
+        if executor is not None:
+            executor.shutdown(cancel_futures=True)
+    res.settings["make_train"] = asdict(make_train)
+    res.settings["test_files"] = [str(p) for p in args.test]
+    res.to_csv(out / "sweep.csv")
+    md = res.to_markdown()
+    atomic_write(out / "sweep.md", lambda fh: fh.write(md.encode()))
+    atomic_write(out / "settings.json", lambda fh: fh.write(json.dumps(res.settings, indent=1).encode()))
+    res.plot(out / "sweep.png")
+    result(md)
+    result(f"wrote {out / 'sweep.csv'}, {out / 'sweep.md'}, {out / 'sweep.png'} "
+           f"({res.settings['seconds']:.0f} s, {res.settings['resumed_jobs']} sigma_P points reused)")
+    return 0
+
+
+def _sweep_interrupted(args) -> str:
+    if args.no_resume:
+        return "finished sigma_P points were not kept (--no-resume)"
+    return f"finished sigma_P points are kept in {Path(args.out) / 'jobs'}; run the same command again to resume"
+
+
+def add_sweep(sub, parents, help):
+    from ..classify.protocol import FAST_MODELS, PUBLISHED_SIGMA_PS
+    from ..generator.augment import SIGN_POLICIES
+
+    p = add_verb(sub, "sweep", parents, help=help, interrupted=_sweep_interrupted,
+                 description="Train classifiers on synthetic sigma_P sets and test them on measured sets; "
+                             "writes sweep.csv, sweep.md and sweep.png to --out. An interrupted run resumes "
+                             "from --out/jobs.")
+    p.add_argument("--test", type=_paths, required=True, metavar="FILES",
+                   help="comma-separated measured test files (e.g. old.npz,new.npz), 400-bin profiles + labels")
+    p.add_argument("--out", type=Path, required=True, help="output folder (created if needed)")
+    p.add_argument("--sigma-p", type=sigma_list, default=list(PUBLISHED_SIGMA_PS), metavar="LIST",
+                   help="comma-separated sigma_P grid, each in [0, 1] (default: the published "
+                        f"{','.join(f'{s:g}' for s in PUBLISHED_SIGMA_PS)})")
+    p.add_argument("--models", type=model_list, default=list(FAST_MODELS), metavar="LIST",
+                   help=f"comma-separated classifiers, of svm, nb, xgb, cnn (default: {','.join(FAST_MODELS)})")
+    p.add_argument("--classes", type=class_list, default=["HELI", "QUAD"], metavar="LIST",
+                   help="comma-separated class references (default: HELI,QUAD)")
+    p.add_argument("--n-per-class", type=positive_int, default=4000, metavar="N",
+                   help="synthetic profiles per class and sigma_P; the paper used 16000 (default: %(default)s)")
+    p.add_argument("--sign-policy", choices=SIGN_POLICIES, default="reflect",
+                   help="sigma_P draws that flip a non-negative parameter's sign (default: %(default)s)")
+    p.add_argument("--seed", type=seed_int, default=0, help="seed of every training set and model (default: "
+                                                             "%(default)s)")
+    p.add_argument("--n-boot", type=nonneg_int, default=1000, metavar="N",
+                   help="bootstrap resamples per score, 0 = no intervals (default: %(default)s)")
+    p.add_argument("--workers", type=positive_int, default=1, metavar="N",
+                   help="parallel processes, one sigma_P point each (default: %(default)s)")
+    p.add_argument("--no-resume", action="store_true", help="ignore results of an earlier run in --out/jobs")
+    add_nuisance_options(p)
+    add_classifier_options(p, normalisation=False)
+    p.set_defaults(func=run_sweep)
+    return p
+
+
+# ---- baseline -----------------------------------------------------------------------------------
+def run_baseline(args) -> int:
+    from ..classify.metrics import evaluate, format_metrics
+    from ..classify.persist import save_model
+    from ..classify.tsaug_baseline import tsaug_baseline, tsaug_cross_validate
+    from ..radar import DataFileError, atomic_write, check_outputs
+
+    if args.folds is None and args.out is None:
+        raise ValueError("give --out MODEL (train on all of DATA) or --folds K (cross-validate on DATA)")
+    if args.test and args.out is None:
+        raise ValueError("--test scores the model trained on all of DATA: give --out MODEL too")
+    check_outputs(args.out, args.json)
+    data = load_profile_file(args.data, length=CNN_BINS, why="the CNN (1 x 20 x 20 input)")
+    if len(data.classes) < 2:
+        raise DataFileError(f"{args.data}: field 'labels' holds only class(es) {data.classes}; training needs "
+                            "at least 2")
+    check_training_memory(args.n_per_class * len(data.classes), "--n-per-class", args.n_per_class,
+                          len(data.classes))
+    tests = {}
+    for path in args.test or []:  # read and check every test file before training
+        test = load_profile_file(path, length=CNN_BINS, why="the CNN (1 x 20 x 20 input)")
+        unknown = sorted(set(test.classes) - set(data.classes))
+        if unknown:
+            raise DataFileError(f"{path}: field 'labels' holds classes {unknown} that are not in {args.data} "
+                                f"({data.classes})")
+        tests[path] = test
+    params = {k: v for k, v in model_params(args, "cnn").items() if k != "epochs"}
+    report = {}
+    if args.folds is not None:
+        info(f"tsaug baseline, {args.folds}-fold cross-validation on {args.data} ({len(data)} profiles); "
+             f"augmenting only inside each training fold")
+        pred, _ = tsaug_cross_validate(data.profiles, data.labels, n_splits=args.folds, n_per_class=args.n_per_class,
+                                       random_state=args.seed, epochs=args.epochs, **params)
+        report["cross_validation"] = evaluate(data.labels, pred, random_state=args.seed)
+        result(format_metrics(report["cross_validation"]))
+    if args.out is not None:
+        model = tsaug_baseline(data.profiles, data.labels, args.n_per_class, args.seed, epochs=args.epochs, **params)
+        save_model(model, args.out)
+        result(f"trained the tsaug-baseline CNN on all {len(data)} profiles; wrote {args.out}")
+        for path, test in tests.items():
+            x, y = _check_test(model, test, path)
+            report[str(path)] = evaluate(y, model.predict(x), labels=model.classes_.tolist(), random_state=args.seed)
+            result(f"on {path}:")
+            result(format_metrics(report[str(path)]))
+    if args.json is not None:
+        payload = json.dumps(report, indent=1).encode()
+        atomic_write(args.json, lambda fh: fh.write(payload))
+        result(f"wrote {args.json}")
+    return 0
+
+
+def add_baseline(sub, parents, help):
+    p = add_verb(sub, "baseline", parents, help=help, interrupted=nothing_written,
+                 description="Augment measured profiles with tsaug (drift + pool + reverse, as published) and "
+                             "train the CNN (100 epochs as published): on all of DATA (--out, optionally scored "
+                             "on --test files) and/or by k-fold cross-validation on DATA (--folds).")
+    p.add_argument("data", type=Path, help="measured training profiles (NPZ, CSV or .mat), 400 bins")
+    p.add_argument("--out", type=Path, default=None,
+                   help="model file to write, trained on all of DATA (default: none; give --out or --folds)")
+    p.add_argument("--test", type=_paths, default=None, metavar="FILES",
+                   help="comma-separated test files to score the --out model on (default: none)")
+    p.add_argument("--folds", type=count_2, default=None, metavar="K",
+                   help="k-fold cross-validation on DATA, K >= 2 (default: none)")
+    p.add_argument("--n-per-class", type=positive_int, default=16000, metavar="N",
+                   help="augmented profiles per class (default: %(default)s)")
+    p.add_argument("--json", type=Path, default=None, help="also write the metrics as JSON (default: none)")
+    p.add_argument("--seed", type=seed_int, default=0, help="seed of augmentation and CNN (default: %(default)s)")
+    add_classifier_options(p, epochs_default=100, cnn_only=True)
+    p.set_defaults(func=run_baseline)
+    return p
+
+
+VERBS = {
+    "train": ("train a classifier (svm, nb, xgb, cnn) on a profile file", add_train),
+    "evaluate": ("score a trained model on a labelled test file", add_evaluate),
+    "sweep": ("the published sigma_P protocol (Table IV, Fig. 13)", add_sweep),
+    "baseline": ("the conventional tsaug baseline (drift + pool + reverse, then the CNN)", add_baseline),
+}

@@ -1,0 +1,370 @@
+"""Shared pieces of the command line, defined once.
+
+* the parser class (errors become one ``mdaug VERB: error: ...`` line, exit 2);
+* argument types that check their value and name the option when it is bad;
+* the global options (``--threads``, ``--quiet``), accepted before and after the verb;
+* option groups shared by several verbs: nuisances/acquisition (augment, sweep),
+  the radar chain (process, simulate), classifiers (train, sweep, baseline);
+* checks run before any work: outputs writable, inputs readable and sensible,
+  memory enough.
+
+Nothing heavy is imported at module level: ``mdaug --help`` stays fast.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+from pathlib import Path
+
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")
+NUISANCE_PHASES = ("relative", "uniform", "fixed")  # checked against mdaug.generator.PHASE_TREATMENTS in tests
+NORMALISATIONS = ("peak", "db", "l2", "none")  # checked against mdaug.radar.NORMALISATIONS in tests
+SIGN_POLICIES = ("reflect", "truncate", "keep")  # checked against mdaug.generator.SIGN_POLICIES in tests
+DTYPES = ("float32", "float64")
+MODELS = ("svm", "nb", "xgb", "cnn")
+
+
+# ---- parser and errors -------------------------------------------------------------
+class UsageError(Exception):
+    """A bad command line or option value: printed as one ``PROG: error: ...`` line, exit 2."""
+
+    def __init__(self, message: str, prog: str | None = None):
+        super().__init__(message)
+        self.prog = prog
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse, but an error raises :class:`UsageError` (one line, no usage dump),
+    so that ``main`` returns 2 instead of exiting the interpreter."""
+
+    def error(self, message):
+        raise UsageError(message, self.prog)
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Wider option column; descriptions and epilogs keep their paragraphs."""
+
+    def __init__(self, prog):
+        super().__init__(prog, max_help_position=34)
+
+    def _fill_text(self, text, width, indent):
+        import textwrap
+
+        paras = [textwrap.fill(" ".join(p.split()), width, initial_indent=indent, subsequent_indent=indent)
+                 for p in text.split("\n\n")]
+        return "\n\n".join(paras)
+
+
+def add_verb(sub, name: str, parents, *, help: str, description: str, interrupted, epilog: str | None = None):
+    """One verb's parser with the global options, and what to say when it is interrupted
+    (``interrupted(args) -> str``)."""
+    p = sub.add_parser(name, help=help, description=description, epilog=epilog, parents=parents,
+                       formatter_class=HelpFormatter)
+    p.set_defaults(interrupted=interrupted)
+    return p
+
+
+def nothing_written(args) -> str:
+    return "no partial file was left (outputs appear only when complete)"
+
+
+# ---- argument types (each error names the option through argparse) ------------------
+def _type(fn, name):
+    fn.__name__ = name
+    return fn
+
+
+def integer(text: str, lo: int | None = None, what: str = "an integer") -> int:
+    try:
+        value = int(text)
+    except (TypeError, ValueError):
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+    if lo is not None and value < lo:
+        raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
+    return value
+
+
+positive_int = _type(lambda t: integer(t, 1, "a positive integer (>= 1)"), "positive_int")
+nonneg_int = _type(lambda t: integer(t, 0, "an integer >= 0"), "nonneg_int")
+seed_int = _type(lambda t: integer(t, 0, "a seed: an integer >= 0"), "seed_int")
+count_2 = _type(lambda t: integer(t, 2, "an integer >= 2"), "count_2")
+
+
+def number(text: str, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
+           what: str = "a number") -> float:
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+    bad = not math.isfinite(value)
+    if lo is not None:
+        bad |= value <= lo if lo_open else value < lo
+    if hi is not None:
+        bad |= value > hi
+    if bad:
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
+    return value
+
+
+finite_float = _type(lambda t: number(t, what="a finite number"), "finite_float")
+nonneg_float = _type(lambda t: number(t, 0.0, what="a finite number >= 0"), "nonneg_float")
+positive_float = _type(lambda t: number(t, 0.0, lo_open=True, what="a finite number > 0"), "positive_float")
+db_at_most_0 = _type(lambda t: number(t, hi=0.0, what="a level in dB <= 0"), "db_at_most_0")
+unit_fraction = _type(lambda t: number(t, 0.0, 1.0, what="a number in [0, 1]"), "unit_fraction")
+
+
+def csv_list(text: str) -> list[str]:
+    """'a, b,c' -> ['a', 'b', 'c'] (non-empty, no repeats)."""
+    items = [t.strip() for t in text.split(",") if t.strip()]
+    if not items:
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list, got {text!r}")
+    if len(set(items)) != len(items):
+        raise argparse.ArgumentTypeError(f"names an item twice: {text!r}")
+    return items
+
+
+def class_list(text: str) -> list[str]:
+    return [c.upper() for c in csv_list(text)]
+
+
+def model_list(text: str) -> list[str]:
+    items = csv_list(text)
+    bad = [m for m in items if m not in MODELS]
+    if bad:
+        raise argparse.ArgumentTypeError(f"unknown model(s) {bad}; known: {','.join(MODELS)}")
+    return items
+
+
+def sigma_list(text: str) -> list[float]:
+    """Comma-separated sigma_P values in [0, 1]."""
+    out = []
+    for t in csv_list(text):
+        out.append(number(t, 0.0, 1.0, what="comma-separated sigma_P values in [0, 1]"))
+    return out
+
+
+def float_pair(text: str) -> tuple[float, float]:
+    """'LO,HI' (or LO:HI) with LO <= HI."""
+    parts = [t for t in text.replace(":", ",").split(",") if t.strip()]
+    if len(parts) != 2:
+        raise argparse.ArgumentTypeError(f"expected LOW,HIGH, got {text!r}")
+    lo, hi = (number(p, what="LOW,HIGH: two finite numbers") for p in parts)
+    if lo > hi:
+        raise argparse.ArgumentTypeError(f"expected LOW,HIGH with LOW <= HIGH, got {text!r}")
+    return lo, hi
+
+
+def default_threads() -> int:
+    try:
+        n = int(os.environ.get("MDAUG_THREADS", "1"))
+    except ValueError:
+        n = 1
+    return max(n, 1)
+
+
+def apply_threads(n: int) -> None:
+    """Pin BLAS, OpenMP and torch to ``n`` threads (scipy.fft uses 1 worker unless asked).
+
+    The default is 1: on these shared 2-core machines a 2-thread run collapses when
+    the second core is busy; ask for 2 with ``--threads 2`` or MDAUG_THREADS=2.
+    """
+    for var in THREAD_VARS:
+        os.environ[var] = str(n)
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(n)
+    os.environ["MDAUG_THREADS"] = str(n)
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(n)
+
+
+def global_options(top: bool) -> Parser:
+    """``--threads`` and ``--quiet``, accepted before the verb (``top``) and after it.
+
+    After the verb they default to SUPPRESS, so a value given there wins and a value
+    given before the verb is kept when none is given after it.
+    """
+    p = Parser(add_help=False)
+    g = p.add_argument_group("global options (before or after the verb)")
+    g.add_argument("--threads", type=positive_int, metavar="N",
+                   default=default_threads() if top else argparse.SUPPRESS,
+                   help="threads for BLAS, FFT and torch (default: $MDAUG_THREADS or 1; 1 is fastest on a "
+                        "busy shared machine)")
+    g.add_argument("-q", "--quiet", action="store_true", default=False if top else argparse.SUPPRESS,
+                   help="no progress bars and no status lines; results, warnings and errors are still printed")
+    return p
+
+
+# ---- shared option groups ------------------------------------------------------------
+def add_nuisance_options(p, *, output: bool = True) -> None:
+    """What an acquisition randomises beyond the class vector (SPEC 3.1), and the
+    profiles' normalisation and precision. Shared by augment and sweep: add options
+    of the acquisition here and both verbs get them."""
+    g = p.add_argument_group("acquisition nuisances (SPEC 3.1)")
+    g.add_argument("--phases", choices=NUISANCE_PHASES, default="relative",
+                   help="vibration phases: relative (published: phi + N(0, sigma_P |phi|)), uniform on the "
+                        "circle, or fixed (default: %(default)s)")
+    g.add_argument("--range-jitter", type=nonneg_float, default=0.0, metavar="BINS",
+                   help="width of the uniform sub-bin jitter of the target range, in FFT bins (48.8 Hz "
+                        "each; default: %(default)s = none)")
+    g.add_argument("--ramps", type=positive_int, default=1, metavar="K",
+                   help="ramps whose magnitude spectra are averaged incoherently, phases advancing by w x "
+                        "2.88 ms between ramps (default: %(default)s)")
+    if output:
+        g = p.add_argument_group("profiles")
+    g.add_argument("--normalisation", choices=NORMALISATIONS, default="peak",
+                   help="normalisation of every profile: peak = 1, dB re peak, unit L2 norm, or none "
+                        "(default: %(default)s)")
+    g.add_argument("--dtype", choices=DTYPES, default="float32",
+                   help="compute precision of f(x): float32 is ~5x faster, error ~1e-7 of the peak "
+                        "(default: %(default)s)")
+
+
+def nuisance_from_args(args):
+    from ..generator import Nuisance
+
+    return Nuisance(phases=args.phases, range_jitter_bins=args.range_jitter, n_ramps=args.ramps)
+
+
+def add_chain_options(p) -> None:
+    """The radar processing chain (SPEC section 4): process and simulate."""
+    from ..radar.chain import EDGE_POLICIES, ORDERS, ChainConfig
+
+    d = ChainConfig()
+    g = p.add_argument_group("radar chain (SPEC section 4)")
+    g.add_argument("--n-angle", type=count_2, default=d.n_angle, metavar="N",
+                   help="angle FFT points across the antennas (default: %(default)s)")
+    g.add_argument("--rel-threshold-db", type=db_at_most_0, default=d.rel_threshold_db, metavar="DB",
+                   help="a peak counts if it is at least this level, in dB (<= 0) relative to the strongest "
+                        "peak (write --rel-threshold-db=-12: a leading minus needs the =) (default: "
+                        "%(default)s dB)")
+    g.add_argument("--floor-db", type=finite_float, default=d.floor_db, metavar="DB",
+                   help="... and at least this many dB above the median noise floor (default: %(default)s dB)")
+    g.add_argument("--max-targets", type=positive_int, default=None, metavar="N",
+                   help="keep at most this many peaks per MTI frame (default: all that pass)")
+    g.add_argument("--edge", choices=EDGE_POLICIES, default=d.edge,
+                   help="signatures reaching past the profile's ends: keep them zero-filled, or drop them "
+                        "(default: %(default)s)")
+    g.add_argument("--order", choices=ORDERS, default=d.order,
+                   help="fast: MTI on the raw samples first (identical result, linear steps); image: the "
+                        "literal order (default: %(default)s)")
+
+
+def chain_from_args(args):
+    from ..radar.chain import ChainConfig
+
+    return ChainConfig(n_angle=args.n_angle, rel_threshold_db=args.rel_threshold_db, floor_db=args.floor_db,
+                       max_targets=args.max_targets, edge=args.edge, order=args.order)
+
+
+def add_classifier_options(p, *, epochs_default: int = 50, normalisation: bool = True, cnn_only: bool = False) -> None:
+    """Classifier settings: train, sweep and baseline (``cnn_only``)."""
+    g = p.add_argument_group("CNN options" if cnn_only else "classifier options")
+    if normalisation:
+        g.add_argument("--normalisation", choices=NORMALISATIONS, default="peak",
+                       help="preprocessing shared by training and testing (default: %(default)s)")
+    g.add_argument("--epochs", type=positive_int, default=epochs_default,
+                   help="CNN training epochs (default: %(default)s)")
+    g.add_argument("--batch-size", type=positive_int, default=256, metavar="N",
+                   help="CNN batch size, profiles (default: %(default)s)")
+    g.add_argument("--patience", type=positive_int, default=None, metavar="EPOCHS",
+                   help="CNN early stopping after this many epochs without a better validation loss "
+                        "(default: none, train every epoch)")
+    if cnn_only:
+        return
+    g.add_argument("--kernel", default="rbf", choices=("rbf", "linear", "poly", "sigmoid"),
+                   help="SVM kernel: rbf = scikit-learn SVC, linear = LinearSVC (fast) (default: %(default)s)")
+    g.add_argument("--n-estimators", type=positive_int, default=100, metavar="N",
+                   help="XGBoost trees (default: %(default)s)")
+
+
+def model_params(args, name: str) -> dict:
+    """Classifier parameters from the command line (only those that apply to ``name``)."""
+    p = {"normalisation": args.normalisation, "threads": args.threads}
+    if name == "cnn":
+        p.update(epochs=args.epochs, batch_size=args.batch_size, patience=args.patience)
+    elif name == "svm":
+        p.update(kernel=args.kernel)
+    elif name == "xgb":
+        p.update(n_estimators=args.n_estimators)
+    return p
+
+
+# ---- checks before any work ------------------------------------------------------------
+def check_out_folder(path, option: str = "--out") -> Path:
+    """A folder to create or reuse: not a file, and its nearest existing parent writable."""
+    from ..radar import DataFileError
+
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise DataFileError(f"{path}: {option} must be a folder, found a file")
+    probe = path
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if probe.exists() and not probe.is_dir():
+        raise DataFileError(f"{path}: cannot create {option}, {probe} is a file")
+    if not os.access(probe, os.W_OK):
+        raise DataFileError(f"{path}: cannot write {option}, folder {probe} is not writable")
+    return path
+
+
+def load_profile_file(path, *, length: int | None = None, why: str = "", allow_zero: bool = False):
+    """Read a measured/synthetic profile file (NPZ, CSV, .mat) and refuse what no verb can
+    use: all-zero rows (naming them), or profiles of the wrong length (``why`` says who
+    needs ``length`` bins)."""
+    from ..radar import DataFileError, load_profiles
+
+    ps = load_profiles(path)
+    if length is not None and ps.profiles.shape[1] != length:
+        raise DataFileError(f"{path}: field 'profiles' has {ps.profiles.shape[1]}-bin profiles; {why} takes "
+                            f"{length}-bin profiles")
+    if not allow_zero:
+        ps.check_no_zero_rows()
+    return ps
+
+
+def check_training_memory(n_profiles: int, option: str, n_per_class: int, n_classes: int,
+                          bins: int = 400, itemsize: int = 8) -> None:
+    """Refuse a training set that would not fit in memory (profiles, a few copies)."""
+    from ..radar.memory import check_memory
+
+    per = 3 * bins * itemsize * n_classes
+    check_memory(per * n_per_class, f"{option} {n_per_class:,}: {n_profiles:,} training profiles x {bins} bins",
+                 per, "per class")
+
+
+def info(message: str = "") -> None:
+    """A status line (silenced by --quiet)."""
+    from ..radar.progress import echo
+
+    echo(message)
+
+
+def result(message: str = "") -> None:
+    """A result line (always printed)."""
+    from ..radar.progress import echo
+
+    echo(message, force=True)
+
+
+def warn(verb: str, message: str) -> None:
+    from ..radar.progress import echo
+
+    echo(f"mdaug {verb}: WARNING: {message}", err=True, force=True)
+
+
+def format_table(headers, rows, align=None) -> str:
+    """A plain-text table: header, rule, rows (strings); ``align`` per column '<' or '>'."""
+    cells = [[str(h) for h in headers]] + [[str(c) for c in r] for r in rows]
+    widths = [max(len(r[i]) for r in cells) for i in range(len(headers))]
+    align = align or ["<"] * len(headers)
+    lines = []
+    for k, r in enumerate(cells):
+        lines.append("  ".join(f"{c:{a}{w}}" for c, a, w in zip(r, align, widths)).rstrip())
+        if k == 0:
+            lines.append("  ".join("-" * w for w in widths))
+    return "\n".join(lines)

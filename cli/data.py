@@ -1,0 +1,192 @@
+"""Measured-data verbs: ``mdaug simulate`` (scene simulator) and ``mdaug process``
+(raw FMCW acquisitions through the published chain)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .common import (DTYPES, add_chain_options, add_verb, chain_from_args, finite_float, float_pair,
+                     info, nonneg_float, nonneg_int, nothing_written, positive_int, result, seed_int)
+
+SCENE_PHASES = ("uniform", "fixed")  # checked against mdaug.generator.scene.SCENE_PHASES in tests
+
+
+# ---- simulate ------------------------------------------------------------------------------
+def scene_from_args(args):
+    from ..generator.scene import SceneConfig
+
+    d = SceneConfig()
+    return SceneConfig(
+        n_frames=args.frames, n_ramps=args.ramps, snr_db=None if args.no_noise else args.snr_db,
+        phases=args.phases, range_m=args.range_m, azimuth_deg=args.azimuth_deg, yaw_deg=args.yaw_deg,
+        drift_step_m=args.drift_mm * 1e-3, n_clutter=args.clutter, clutter_db=args.clutter_db,
+        quantise=not args.no_adc, specimen_spread=0.0 if args.reference_specimens else args.specimen_spread,
+        dtype=args.dtype, body_ratio=d.body_ratio,
+    )
+
+
+def run_simulate(args) -> int:
+    import time
+
+    from ..generator import load_reference
+    from ..generator.scene import simulate_campaign
+    from ..radar import RadarConfig, check_writable
+
+    check_writable(args.out)
+    radar = RadarConfig()
+    load_reference(args.class_name)  # unknown class: fail before any work
+    lo, hi = args.range_m
+    if lo <= 0 or hi > radar.max_range_m:
+        raise ValueError(f"--range-m {lo:g},{hi:g}: the target range must lie in (0, {radar.max_range_m:.2f}] m "
+                         "(the chain's unambiguous range)")
+    frames = radar.mti_depth + 1
+    if args.frames is not None and args.frames < frames:
+        raise ValueError(f"--frames {args.frames}: the MTI needs at least mti_depth + 1 = {frames} frames")
+    scene, chain = scene_from_args(args), chain_from_args(args)
+    info(f"simulating {args.acquisitions} {args.class_name.upper()} acquisition(s) of {args.specimens} "
+         f"specimen(s) (seed {args.seed})")
+    t0 = time.perf_counter()
+    camp = simulate_campaign(args.class_name, args.specimens, args.acquisitions, args.seed, scene=scene,
+                             radar=radar, keep_cubes=args.keep_cubes, chain=chain)
+    camp.save(args.out)
+    took = time.perf_counter() - t0
+    result(f"wrote {args.out}: {len(camp)} simulated {camp.labels[0]} acquisitions of {args.specimens} "
+           f"specimen(s), {camp.profiles.shape[1]}-bin profiles{' + raw cubes' if args.keep_cubes else ''} "
+           f"({len(camp) / took:,.1f} acquisitions/s; {camp.on_target.mean():.0%} on target)")
+    return 0
+
+
+def add_simulate(sub, parents, help):
+    from ..generator.scene import SceneConfig
+
+    d = SceneConfig()
+    p = add_verb(sub, "simulate", parents, help=help, interrupted=nothing_written,
+                 description="Scene simulator: drone specimens of a class around its reference, acquisitions "
+                             "with random phases, yaw, range, azimuth, hover drift, body, clutter, noise and "
+                             "12-bit ADC, processed by the published chain. Writes profiles + labels + the true "
+                             "parameters + settings (NPZ).")
+    p.add_argument("--class", dest="class_name", required=True, metavar="CLASS",
+                   help="class reference to simulate (HELI or QUAD)")
+    p.add_argument("--acquisitions", type=positive_int, required=True, metavar="N",
+                   help="acquisitions in total, spread evenly over the specimens")
+    p.add_argument("--specimens", type=positive_int, default=1, metavar="N",
+                   help="drones of the class, each drawn around the reference (default: %(default)s)")
+    p.add_argument("--seed", type=seed_int, default=0, help="random seed of the whole campaign (default: %(default)s)")
+    p.add_argument("--out", type=Path, required=True, help="output NPZ (profiles, labels, truth, settings)")
+    p.add_argument("--keep-cubes", action="store_true", help="also store the raw cubes (field 'cubes')")
+    g = p.add_argument_group("scene")
+    g.add_argument("--snr-db", type=finite_float, default=d.snr_db, metavar="DB",
+                   help="target to receiver-noise power per IF sample, dB (default: %(default)s dB)")
+    g.add_argument("--no-noise", action="store_true", help="no receiver noise (overrides --snr-db)")
+    g.add_argument("--ramps", type=positive_int, default=d.n_ramps, metavar="K",
+                   help="ramps per frame, averaged incoherently by the chain (default: %(default)s)")
+    g.add_argument("--frames", type=positive_int, default=None, metavar="N",
+                   help="frames per acquisition, at least mti_depth + 1 (default: mti_depth + 1 = 11, one "
+                        "MTI frame)")
+    g.add_argument("--phases", choices=SCENE_PHASES, default=d.phases,
+                   help="vibration phases per frame: uniform (random) or fixed (default: %(default)s)")
+    g.add_argument("--range-m", type=float_pair, default=d.range_m, metavar="LO,HI",
+                   help="target range, uniform in LO..HI, m (default: %(default)s m)")
+    g.add_argument("--azimuth-deg", type=float_pair, default=d.azimuth_deg, metavar="LO,HI",
+                   help="target azimuth, uniform in LO..HI, degrees; write --azimuth-deg=-30,30 (a leading "
+                        "minus needs the =) (default: %(default)s deg)")
+    g.add_argument("--yaw-deg", type=nonneg_float, default=d.yaw_deg, metavar="DEG",
+                   help="drone yaw, uniform in +- this, degrees (default: %(default)s deg)")
+    g.add_argument("--drift-mm", type=nonneg_float, default=d.drift_step_m * 1e3, metavar="MM",
+                   help="hover drift step per frame, mm (default: %(default)s mm)")
+    g.add_argument("--clutter", type=nonneg_int, default=d.n_clutter, metavar="N",
+                   help="static clutter scatterers (default: %(default)s)")
+    g.add_argument("--clutter-db", type=float_pair, default=d.clutter_db, metavar="LO,HI",
+                   help="clutter amplitude relative to the target, uniform in LO..HI, dB; write "
+                        "--clutter-db=-10,10 (default: %(default)s dB)")
+    g.add_argument("--no-adc", action="store_true", help="keep float samples (no gain control, no 12-bit codes)")
+    g.add_argument("--specimen-spread", type=nonneg_float, default=d.specimen_spread, metavar="X",
+                   help="multiplier of every specimen-to-specimen spread (default: %(default)s)")
+    g.add_argument("--reference-specimens", action="store_true",
+                   help="every specimen is the class reference itself (spread 0)")
+    g.add_argument("--dtype", choices=DTYPES, default=d.dtype,
+                   help="precision of the simulated IF samples (default: %(default)s)")
+    add_chain_options(p)
+    p.set_defaults(func=run_simulate)
+    return p
+
+
+# ---- process -------------------------------------------------------------------------------
+def run_process(args) -> int:
+    import json
+    import time
+
+    import numpy as np
+
+    from ..radar import DataFileError, RadarConfig, atomic_savez, check_writable
+    from ..radar.chain import process_cube
+    from ..radar.progress import progress_bar
+    from ..radar.raw import read_raw
+
+    check_writable(args.out)
+    radar, chain = RadarConfig(), chain_from_args(args)
+    raws = []
+    for path in args.raw:  # read and check every file before processing any
+        raw = read_raw(path, radar)
+        if args.label is None and raw.labels is None:
+            raise DataFileError(f"{path}: no field 'label' or 'labels'; pass --label LABEL")
+        zero = [i for i, cube in enumerate(raw.cubes) if not np.any(cube)]
+        if zero:
+            field = "cube" if len(raw) == 1 else f"cubes{zero[:5]}"
+            raise DataFileError(f"{path}: field {field!r} is all zeros (no signal was recorded); nothing to "
+                                "process")
+        raws.append(raw)
+    cols = {k: [] for k in ("profiles", "labels", "mti_profiles", "range_m", "direction_deg", "peak_db",
+                            "n_missing", "frame", "acquisition", "source")}
+    t0, n_acq = time.perf_counter(), 0
+    with progress_bar(total=sum(len(r) for r in raws), desc="acquisitions", unit="acq") as bar:
+        for path, raw in zip(args.raw, raws):
+            for i, cube in enumerate(raw.cubes):
+                res = process_cube(cube, radar, chain)
+                label = args.label if args.label is not None else str(raw.labels[i])
+                n = len(res)
+                n_acq += 1
+                for key, val in (("profiles", res.signatures), ("mti_profiles", res.profiles),
+                                 ("range_m", res.range_m), ("direction_deg", res.direction_deg),
+                                 ("peak_db", res.peak_db), ("n_missing", res.n_missing), ("frame", res.frame)):
+                    cols[key].append(val)
+                cols["labels"].append(np.full(n, label))
+                cols["acquisition"].append(np.full(n, i))
+                cols["source"].append(np.full(n, str(path)))
+                bar.update(1)
+    if sum(len(p) for p in cols["profiles"]) == 0:
+        files = ", ".join(map(str, args.raw))
+        if chain.edge == "drop":
+            why = "every signature reached past the profile's ends and --edge drop discarded it (try --edge keep)"
+        else:
+            why = ("no peak passed the detection thresholds (lower --floor-db or --rel-threshold-db, or check "
+                   "that the cubes hold moving targets: the MTI removes static ones)")
+        raise DataFileError(f"{files}: field 'cube': the chain found no signature: {why}")
+    out = {k: np.concatenate(v) for k, v in cols.items()}
+    settings = {"kind": "mdaug processed raw acquisitions", "simulated": False, "files": [str(p) for p in args.raw],
+                "radar": radar.to_dict(), "chain": chain.to_dict(),
+                "profiles": "linear magnitude, one row per significant peak per MTI frame"}
+    atomic_savez(args.out, settings=np.array(json.dumps(settings)), **out)
+    took = time.perf_counter() - t0
+    result(f"wrote {args.out}: {len(out['labels'])} signatures x {radar.slice_length} bins from {n_acq} "
+           f"acquisition(s) in {len(args.raw)} file(s) ({n_acq / took:,.1f} acquisitions/s)")
+    return 0
+
+
+def add_process(sub, parents, help):
+    p = add_verb(sub, "process", parents, help=help, interrupted=nothing_written,
+                 description="Range FFT, angle FFT, MTI, +-3.5 deg integration and signature extraction on raw "
+                             "cubes (NPZ/.mat field 'cube' (frames, [ramps,] antennas, samples) or 'cubes'); "
+                             "writes profiles + labels NPZ (the measured-profile format).")
+    p.add_argument("raw", nargs="+", type=Path, metavar="RAW", help="raw acquisition file(s), .npz or .mat")
+    p.add_argument("--out", type=Path, required=True, help="output NPZ (measured-profile format)")
+    p.add_argument("--label", default=None,
+                   help="class label of every signature (default: the file's field 'label' or 'labels')")
+    add_chain_options(p)
+    p.set_defaults(func=run_process)
+    return p
+
+
+VERBS = {
+    "simulate": ("simulate a measurement campaign (raw FMCW acquisitions -> profiles)", add_simulate),
+    "process": ("raw FMCW acquisitions -> measured profiles (the published chain)", add_process),
+}

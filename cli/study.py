@@ -1,0 +1,142 @@
+"""``mdaug run``: the whole study (calibrate, augment two ways, classify, compare, report).
+
+The whole configuration is checked (types, names, sizes, files) before the output
+folder is created; progress shows one bar of the study's stages, with each stage's
+own bar (calibration, sweep cells, CNN epochs) below it.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .common import add_verb, check_out_folder, format_table, info, positive_int, result, seed_int, warn
+
+
+def stage_names(cfg) -> list[str]:
+    """The stages a study of ``cfg`` runs, in order (for the progress bar's total)."""
+    p = cfg.protocol
+    names = ["data", *(f"calibrate_{c}" for c in cfg.classes), *(f"sweep_{n}" for n in p.nuisances),
+             *(f"cnn_{s}" for s in p.cnn_strategies), "profiles_figure"]
+    if cfg.simulated:
+        names.append("ceiling")
+    return names + ["speed"]
+
+
+class StageProgress:
+    """Listener of the study's stage cache: one bar over the stages, with an ETA."""
+
+    def __init__(self, names: list[str]):
+        from ..radar.progress import progress_bar
+
+        self.bar = progress_bar(total=len(names), desc="study stages", unit="stage")
+        self.done: set[str] = set()
+
+    def stage_started(self, name: str) -> None:
+        self.bar.set_postfix_str(name)
+
+    def stage_finished(self, name: str, seconds: float, cached: bool) -> None:
+        if name not in self.done:
+            self.done.add(name)
+            self.bar.set_postfix_str(f"{name} {'cached' if cached else f'{seconds:.0f} s'}", refresh=False)
+            self.bar.update(1)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def _fmt(v, spec=".3f") -> str:
+    return "-" if v is None else format(v, spec)
+
+
+def summary(results: dict) -> str:
+    """The final table of ``mdaug run``: each strategy's CNN on its main test set, the
+    separability ceiling, and the calibration's convergence."""
+    classes = list(results["config"]["classes"])
+    rows = []
+
+    def row(name, test, m):
+        lo, hi = (m.get("ci") or {}).get("accuracy") or (None, None)
+        ci = "-" if lo is None else f"[{lo:.3f}, {hi:.3f}]"
+        recalls = [(m["per_class"].get(c) or {}).get("recall") for c in classes]
+        rows.append([name, test, str(m.get("n", "")), _fmt(m["accuracy"]), ci, _fmt(m.get("balanced_accuracy")),
+                     *(_fmt(r, ".2f") for r in recalls)])
+
+    for name, s in results["strategies"].items():
+        tests = s["tests"]
+        test = "new" if "new" in tests else next(iter(tests))
+        row(f"CNN {name}" + (f" (sigma_P {s['sigma_p']:g})" if s.get("sigma_p") is not None else ""), test,
+            tests[test])
+    for model, c in ((results.get("ceiling") or {}).get("models") or {}).items():
+        tests = c["tests"]
+        if tests:
+            test = "new" if "new" in tests else next(iter(tests))
+            row(f"ceiling {model}", test, tests[test])
+    table = format_table(["strategy", "test", "n", "accuracy", "95% CI", "balanced",
+                          *(f"recall {c}" for c in classes)], rows,
+                         ["<", "<", ">", ">", "<", ">", *(">" for _ in classes)])
+    lines = [table, ""]
+    for cls, r in results["calibration"].items():
+        d = r.get("diagnostics", {})
+        state = "converged" if r["converged"] else f"NOT converged ({d.get('reason', 'see the report')})"
+        lines.append(f"calibration {cls}: {state}")
+    return "\n".join(lines)
+
+
+def run_study(args) -> int:
+    from ..reports.config import StudyConfig, load_config
+
+    out = check_out_folder(args.out)
+    cfg = load_config(args.config) if args.config else StudyConfig()
+    if args.seed is not None:
+        cfg.seed = args.seed
+    if args.workers is not None:
+        cfg.workers = args.workers
+    if args.scheduler:
+        cfg.scheduler = args.scheduler
+    if args.quick:
+        cfg = cfg.quick_version()
+    cfg.validate()  # everything checked before the output folder exists
+    from ..reports.study import Study
+
+    progress = StageProgress(stage_names(cfg))
+    try:
+        study = Study(cfg, out, log=info)
+        study.cache.listener = progress
+        results = study.run()
+    finally:
+        progress.close()
+    result(f"\nstudy finished in {results['total_seconds']:.0f} s: {out / 'report.html'}, {out / 'results.json'}")
+    result(summary(results))
+    bad = [c for c, r in results["calibration"].items() if not r["converged"]]
+    if bad:
+        warn("run", f"calibration of {', '.join(bad)} did not converge (see the report's diagnostics)")
+    return 0
+
+
+def _interrupted(args) -> str:
+    return (f"finished stages are kept in {Path(args.out) / 'stages'}; run the same command again to resume")
+
+
+def add_run(sub, parents, help):
+    p = add_verb(sub, "run", parents, help=help, interrupted=_interrupted,
+                 description="Calibrate each class, synthesise training sets (sigma_P and posterior), train the "
+                             "classifiers and the CNN, compare against tsaug, report. The configuration is checked "
+                             "in full before the output folder is created; an interrupted run resumes from "
+                             "OUT/stages.")
+    p.add_argument("--config", type=Path, default=None,
+                   help="study TOML with sections [data], [protocol], [simulation] (default: the embedded "
+                        "simulated scene)")
+    p.add_argument("--out", type=Path, default=Path("mdaug-study"),
+                   help="output folder, created if needed (default: %(default)s)")
+    p.add_argument("--quick", action="store_true", help="small sizes: a run of one to two minutes")
+    p.add_argument("--seed", type=seed_int, default=None, help="the study's one seed (default: the config's, 0)")
+    p.add_argument("--workers", type=positive_int, default=None, metavar="N",
+                   help="local worker processes for independent jobs (default: the config's, 1)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="dask.distributed scheduler address, or 'local' to start a LocalCluster (default: none)")
+    p.set_defaults(func=run_study)
+    return p
+
+
+VERBS = {
+    "run": ("run the whole study and write results.json + report.html", add_run),
+}
