@@ -178,7 +178,7 @@ class Study:
             make_train.cache_key = settings_key(self.sweep_key, nuisance)  # lets the sweep resume per sigma_P
             res = sigma_p_sweep(make_train, tests, sigma_ps=p.sigma_p, models=p.models, n_boot=p.n_boot,
                                 random_state=_seed(self.cfg, "sweep", nuisance), executor=executor,
-                                cache_dir=self.out / "stages" / f"sweep_{nuisance}", progress=False)
+                                cache_dir=self.out / "stages" / f"sweep_{nuisance}")  # progress: bar of the cells on a terminal
             png = self.out / "figures" / f"sweep_{nuisance}.png"
             res.plot(png)
             res.to_csv(self.out / f"sweep_{nuisance}.csv")
