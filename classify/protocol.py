@@ -288,7 +288,7 @@ def sigma_p_sweep(make_train, test_sets: dict, sigma_ps=PUBLISHED_SIGMA_PS, mode
     t0 = time.perf_counter()
     bar = progress_bar(total=len(todo) * len(models), desc="sigma_P sweep cells", unit="cell", progress=progress)
     with bar:
-        if executor is None:  # serial: one tick per trained model
+        if executor is None or getattr(executor, "name", None) == "serial":  # one tick per trained model
             for i, job in todo:
                 results[i] = fn(job, lambda: bar.update(1))
         else:  # workers: one tick per model as each sigma_P job comes back
