@@ -49,7 +49,8 @@ def build_parser(full=None) -> Parser:
                                 "for drone classification. Run 'mdaug VERB --help' for a verb's options.")
     parser.add_argument("--version", action="version", version=f"mdaug {package_version()}",
                         help="print the version and exit")
-    sub = parser.add_subparsers(dest="verb", metavar="VERB", parser_class=Parser)
+    sub = parser.add_subparsers(dest="verb", metavar="VERB", parser_class=Parser,
+                                help="the job to run (each has its own --help)")
     parents = [global_options(top=False)]
     for name, (text, add) in verbs().items():
         if full is None or name in full:

@@ -57,13 +57,15 @@ def run_augment(args) -> int:
 
     from ..generator.dataset import check_dataset_memory, make_dataset, save_dataset
     from ..radar import atomic_write, check_outputs
+    from ..radar.progress import progress_enabled
 
     check_outputs(args.out, args.plot)
     augmenters, extra = augmenters_from_args(args)
     check_dataset_memory(augmenters, args.n_per_class, what="--n-per-class")
     info(f"synthesising {args.n_per_class:,} profiles per class of {', '.join(a.label for a in augmenters)}")
     t0 = time.perf_counter()
-    ds = make_dataset(augmenters, args.n_per_class, args.seed, extra_settings=extra)
+    ds = make_dataset(augmenters, args.n_per_class, args.seed, extra_settings=extra,
+                      progress=None if progress_enabled() else False)  # None: a bar for large sets
     save_dataset(args.out, ds)
     took = time.perf_counter() - t0
     result(f"wrote {args.out}: {len(ds)} profiles x {ds.profiles.shape[1]} bins "

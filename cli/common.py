@@ -39,6 +39,10 @@ class Parser(argparse.ArgumentParser):
     """argparse, but an error raises :class:`UsageError` (one line, no usage dump),
     so that ``main`` returns 2 instead of exiting the interpreter."""
 
+    def __init__(self, *args, **kw):
+        kw.setdefault("allow_abbrev", False)  # --sigma must not silently mean --sigma-p
+        super().__init__(*args, **kw)
+
     def error(self, message):
         raise UsageError(message, self.prog)
 

@@ -10,6 +10,10 @@ from .common import (DTYPES, add_chain_options, add_verb, chain_from_args, finit
 SCENE_PHASES = ("uniform", "fixed")  # checked against mdaug.generator.scene.SCENE_PHASES in tests
 
 
+def _pair(v) -> str:
+    return f"{v[0]:g},{v[1]:g}"
+
+
 # ---- simulate ------------------------------------------------------------------------------
 def scene_from_args(args):
     from ..generator.scene import SceneConfig
@@ -85,10 +89,10 @@ def add_simulate(sub, parents, help):
     g.add_argument("--phases", choices=SCENE_PHASES, default=d.phases,
                    help="vibration phases per frame: uniform (random) or fixed (default: %(default)s)")
     g.add_argument("--range-m", type=float_pair, default=d.range_m, metavar="LO,HI",
-                   help="target range, uniform in LO..HI, m (default: %(default)s m)")
+                   help=f"target range, uniform in LO..HI, m (default: {_pair(d.range_m)} m)")
     g.add_argument("--azimuth-deg", type=float_pair, default=d.azimuth_deg, metavar="LO,HI",
                    help="target azimuth, uniform in LO..HI, degrees; write --azimuth-deg=-30,30 (a leading "
-                        "minus needs the =) (default: %(default)s deg)")
+                        f"minus needs the =) (default: {_pair(d.azimuth_deg)} deg)")
     g.add_argument("--yaw-deg", type=nonneg_float, default=d.yaw_deg, metavar="DEG",
                    help="drone yaw, uniform in +- this, degrees (default: %(default)s deg)")
     g.add_argument("--drift-mm", type=nonneg_float, default=d.drift_step_m * 1e3, metavar="MM",
@@ -97,7 +101,7 @@ def add_simulate(sub, parents, help):
                    help="static clutter scatterers (default: %(default)s)")
     g.add_argument("--clutter-db", type=float_pair, default=d.clutter_db, metavar="LO,HI",
                    help="clutter amplitude relative to the target, uniform in LO..HI, dB; write "
-                        "--clutter-db=-10,10 (default: %(default)s dB)")
+                        f"--clutter-db=-10,10 (default: {_pair(d.clutter_db)} dB)")
     g.add_argument("--no-adc", action="store_true", help="keep float samples (no gain control, no 12-bit codes)")
     g.add_argument("--specimen-spread", type=nonneg_float, default=d.specimen_spread, metavar="X",
                    help="multiplier of every specimen-to-specimen spread (default: %(default)s)")

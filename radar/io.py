@@ -274,17 +274,29 @@ def read_arrays(path) -> dict:
     suffix = path.suffix.lower()
     if suffix == ".mat":
         return _read_mat(path)
+    with open(path, "rb") as fh:
+        magic = fh.read(6)
+    if magic.startswith(b"\x93NUMPY"):
+        raise DataFileError(f"{path}: expected an NPZ archive, found a single .npy array")
+    if not magic.startswith(b"PK"):
+        what = "a Python pickle; refusing to unpickle it" if magic[:1] == b"\x80" else "not a ZIP archive"
+        raise DataFileError(f"{path}: not a readable NPZ file ({what})")
     try:
         with np.load(path, allow_pickle=False) as data:
-            if not hasattr(data, "files"):
-                raise DataFileError(f"{path}: expected an NPZ archive, found a single array")
-            return {k: data[k] for k in data.files}
+            out = {}
+            for key in data.files:
+                try:
+                    out[key] = data[key]
+                except ValueError as exc:
+                    if "allow_pickle" in str(exc):
+                        raise DataFileError(f"{path}: field {key!r} holds Python objects; refusing to "
+                                            "unpickle it") from None
+                    raise DataFileError(f"{path}: field {key!r} is not a readable array ({exc})") from None
+            return out
     except DataFileError:
         raise
-    except ValueError as exc:
-        raise DataFileError(f"{path}: holds Python objects; refusing to unpickle ({exc})") from None
     except Exception as exc:
-        raise DataFileError(f"{path}: not a readable NPZ file ({exc})") from None
+        raise DataFileError(f"{path}: not a readable NPZ file ({type(exc).__name__}: {exc})") from None
 
 
 def load_profiles(path) -> ProfileSet:

@@ -46,7 +46,7 @@ def test_missing_empty_pickled_and_headerless_files(tmp_path):
     with pytest.raises(DataFileError, match="empty.npz: file is empty"):
         load_profiles(tmp_path / "empty.npz")
     np.savez(tmp_path / "obj.npz", profiles=np.array([{"a": 1}], dtype=object), labels=np.array(["A"]))
-    with pytest.raises(DataFileError, match="obj.npz: holds Python objects; refusing to unpickle"):
+    with pytest.raises(DataFileError, match="obj.npz: field .profiles. holds Python objects; refusing to unpickle"):
         load_profiles(tmp_path / "obj.npz")
     (tmp_path / "h.csv").write_text("1,2,3\n4,5,6\n")
     with pytest.raises(DataFileError, match="h.csv: CSV header has no 'label' column"):
