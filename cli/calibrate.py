@@ -39,6 +39,10 @@ def particles_arg(text: str) -> int:
     return integer(text, 2, "an integer >= 2 (leave the option out for auto)")
 
 
+def _cap(value) -> str:
+    return "no cap" if value is None else str(value)
+
+
 def _backend(args) -> Path:
     return args.backend if args.backend is not None else Path(f"{args.out}.chain.h5")
 
@@ -132,7 +136,8 @@ def add_calibrate(sub, parents, help):
                    help="emcee: ensemble from the fit, run to 50 tau; smc: tempered SMC from the prior with "
                         f"mode jumps, for multimodal posteriors, gives the evidence (default: {d.sampler})")
     g.add_argument("--max-steps", type=positive_int, default=None, metavar="N",
-                   help=f"emcee step budget, steps per walker (default: {d.max_steps}; --quick: {q.max_steps})")
+                   help=f"emcee step budget, steps per walker (default: {_cap(d.max_steps)}; --quick: "
+                        f"{_cap(q.max_steps)})")
     g.add_argument("--walkers", type=walkers_arg, default=None, metavar="N",
                    help="emcee walkers (default: 3 x the number of sampled coordinates, at least 32; "
                         f"--quick: {q.n_walkers})")
