@@ -202,9 +202,9 @@ class CNNClassifier(ProfileClassifier):
                     best, best_state, stale, self.best_epoch_ = key, copy.deepcopy(self.net_.state_dict()), 0, epoch
                 else:
                     stale += 1
-                bar.set_postfix_str(f"loss {total / len(ytr):.3f}, val acc {val_acc:.3f} "
-                                    f"(best {self.history_[self.best_epoch_ - 1]['val_accuracy']:.3f} "
-                                    f"at epoch {self.best_epoch_})", refresh=False)
+                bar.set_postfix_str(f"loss {total / len(ytr):.3f} val acc {val_acc:.3f} "
+                                    f"best {self.history_[self.best_epoch_ - 1]['val_accuracy']:.3f}"
+                                    f"@{self.best_epoch_}", refresh=False)
                 if self.patience is not None and stale >= self.patience:
                     break
             bar.close()

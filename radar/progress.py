@@ -60,8 +60,18 @@ def progress_bar(iterable=None, *, total=None, desc: str | None = None, unit: st
     """
     from tqdm import tqdm
 
-    return tqdm(iterable, total=total, desc=desc, unit=unit, file=sys.stderr, leave=leave,
-                disable=not progress_enabled(progress), dynamic_ncols=True, **kw)
+    show = progress_enabled(progress)
+    if show:  # follow the terminal's size; a pty that reports 0 x 0 gets 100 x 50
+        try:
+            size = os.get_terminal_size(sys.stderr.fileno())
+        except (OSError, ValueError, AttributeError):
+            size = os.terminal_size((0, 0))
+        if size.columns > 0 and size.lines > 0:
+            kw.setdefault("dynamic_ncols", True)
+        else:
+            kw.setdefault("ncols", size.columns if size.columns > 0 else 100)
+            kw.setdefault("nrows", size.lines if size.lines > 0 else 50)
+    return tqdm(iterable, total=total, desc=desc, unit=unit, file=sys.stderr, leave=leave, disable=not show, **kw)
 
 
 def echo(message: str = "", *, err: bool = False, force: bool = False) -> None:
