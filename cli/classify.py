@@ -172,7 +172,9 @@ def run_sweep(args) -> int:
     if args.workers > 1:
         from concurrent.futures import ProcessPoolExecutor
 
-        executor = ProcessPoolExecutor(args.workers)
+        from ..radar.progress import quiet_worker
+
+        executor = ProcessPoolExecutor(args.workers, initializer=quiet_worker)
     info(f"sweep: {len(args.sigma_p)} sigma_P x {len(args.models)} models, {2 * args.n_per_class} training "
          f"profiles each, tests {', '.join(f'{k} ({len(v[1])})' for k, v in tests.items())}")
     try:

@@ -33,6 +33,12 @@ def set_quiet(quiet: bool = True) -> bool:
     return before
 
 
+def quiet_worker() -> None:
+    """Initializer of worker processes: their bars would garble the parent's on the
+    same terminal, so workers draw none (the parent shows the jobs' progress)."""
+    set_quiet(True)
+
+
 def _isatty(stream) -> bool:
     try:
         return bool(stream.isatty())

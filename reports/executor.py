@@ -33,7 +33,9 @@ class ProcessExecutor:
 
     def map(self, fn, items):
         if self._pool is None:
-            self._pool = ProcessPoolExecutor(max_workers=self.workers)
+            from ..radar.progress import quiet_worker
+
+            self._pool = ProcessPoolExecutor(max_workers=self.workers, initializer=quiet_worker)
         return list(self._pool.map(fn, items))
 
     def close(self) -> None:
