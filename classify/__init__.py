@@ -1,9 +1,9 @@
 """Classifiers on range-profile arrays, the published sigma_P protocol, the tsaug
 baseline and honest metrics.
 
-Imports only :mod:`mdaug.radar` (normalisation, I/O); the CLI glue in
-``commands.py`` is the one place that builds synthetic sets with mdaug.generator.
-torch loads only when the CNN is used.
+Imports only :mod:`mdaug.radar` (normalisation, I/O, progress); the synthetic sets
+of ``mdaug sweep`` are built by the command line (:mod:`mdaug.cli.classify`) with
+mdaug.generator. torch loads only when the CNN is used.
 """
 from .base import ProfileClassifier
 from .metrics import evaluate, format_metrics, plot_confusion
