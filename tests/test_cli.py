@@ -309,10 +309,17 @@ def test_the_posterior_netcdf_gets_the_usual_file_mode(tmp_path):
 
 # ---- layering ----------------------------------------------------------------------------------------
 def test_library_packages_know_nothing_of_the_command_line():
+    import ast
+
     for pkg in LIBRARY:
         assert not (ROOT / pkg / "commands.py").exists()
         for path in (ROOT / pkg).rglob("*.py"):
             text = path.read_text()
             assert "argparse" not in text, path
-            assert "from .. import __version__" not in text and "mdaug.cli" not in text, path
+            for node in ast.walk(ast.parse(text)):
+                if isinstance(node, ast.ImportFrom):  # imports point down: no reach-up, no cli
+                    assert not (node.level == 2 and node.module is None), f"{path}: from .. import"
+                    assert "cli" not in (node.module or "").split("."), path
+                elif isinstance(node, ast.Import):
+                    assert not any("cli" in a.name.split(".") for a in node.names), path
     assert not (ROOT / "cli.py").exists() and (ROOT / "cli" / "__init__.py").is_file()
