@@ -280,6 +280,31 @@ def render_cubes(d: Draws, sl: slice, scene: SceneConfig, radar: RadarConfig, no
     return np.clip(np.rint(cube * gain), -full, full - 1).astype(np.int16)
 
 
+def literal_chain(d: Draws, scene: SceneConfig, radar: RadarConfig, chain: ChainConfig, noise_rngs,
+                  keep_cubes: bool = False, chunk: int | None = None):
+    """Render every acquisition of ``d`` as a raw cube and run the whole chain on it.
+
+    noise_rngs: one Generator per acquisition. Returns ``(rows, cubes)``: rows a list of
+    (ChainResult, j) with j the index of the strongest signature of the last MTI frame;
+    cubes (N, F, K, A, N_s) or None. Raises ValueError if an acquisition has no signature.
+    """
+    n, step = d.x.shape[0], CHUNK_ACQ if chunk is None else int(chunk)
+    cubes, rows = [], []
+    for lo in range(0, n, step):
+        sl = slice(lo, min(n, lo + step))
+        block = render_cubes(d, sl, scene, radar, noise_rngs[sl])
+        if keep_cubes:
+            cubes.append(block)
+        for cube in block:
+            res = process_cube(cube, radar, chain)
+            last = res.frame == res.frame.max()  # strongest signature of the last MTI frame
+            j = int(np.flatnonzero(last)[0]) if last.any() else None
+            rows.append((res, j))
+    if any(j is None for _, j in rows):
+        raise ValueError("the chain found no signature in some acquisition (edge='drop' with targets near the ends?)")
+    return rows, (np.concatenate(cubes) if keep_cubes else None)
+
+
 # ---- campaigns --------------------------------------------------------------------
 @dataclass
 class Campaign:
@@ -379,20 +404,7 @@ def simulate_campaign(reference: ClassParams | str, n_specimens: int, n_acquisit
     d = draw_acquisitions(specimens, n, scene, radar, np.random.default_rng(ss_draw))
     noise_rngs = [np.random.default_rng(s) for s in ss_noise.spawn(n)]
     f = scene.frames(radar)
-    cubes = [] if keep_cubes else None
-    rows = []
-    for lo in range(0, n, CHUNK_ACQ):
-        sl = slice(lo, min(n, lo + CHUNK_ACQ))
-        block = render_cubes(d, sl, scene, radar, noise_rngs[sl])
-        if keep_cubes:
-            cubes.append(block)
-        for cube in block:
-            res = process_cube(cube, radar, chain)
-            last = res.frame == res.frame.max()  # strongest signature of the last MTI frame
-            j = int(np.flatnonzero(last)[0]) if last.any() else None
-            rows.append((res, j))
-    if any(j is None for _, j in rows):
-        raise ValueError("the chain found no signature in some acquisition (edge='drop' with targets near the ends?)")
+    rows, cubes = literal_chain(d, scene, radar, chain, noise_rngs, keep_cubes=keep_cubes)
     pick = lambda key: np.array([getattr(res, key)[j] for res, j in rows])  # noqa: E731
     settings = {
         "simulated": True, "kind": "mdaug scene simulation", "class": ref.name,
@@ -407,5 +419,5 @@ def simulate_campaign(reference: ClassParams | str, n_specimens: int, n_acquisit
         range_true_m=d.range_m[:, -1], azimuth_deg=d.azimuth_deg, yaw_deg=d.yaw_deg,
         range_m=pick("range_m"), direction_deg=pick("direction_deg"), peak_db=pick("peak_db"),
         n_missing=pick("n_missing"), mti_profiles=pick("profiles").astype(np.float32),
-        settings=settings, cubes=None if cubes is None else np.concatenate(cubes),
+        settings=settings, cubes=cubes,
     )
