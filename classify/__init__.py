@@ -12,13 +12,13 @@ from .models import (CLASSIFIERS, NaiveBayesClassifier, SVMClassifier, XGBClassi
 from .persist import load_model, save_model
 from .preprocess import preprocess
 from .protocol import FAST_MODELS, PUBLISHED_SIGMA_PS, SweepResult, sigma_p_sweep
-from .tsaug_baseline import TsaugAugmenter, TsaugSettings, tsaug_baseline, tsaug_cross_validate
+from .tsaug_baseline import TsaugAugmenter, TsaugSettings, tsaug_baseline, tsaug_cross_validate, tsaug_set
 
 __all__ = [
     "ProfileClassifier", "evaluate", "format_metrics", "plot_confusion", "CLASSIFIERS",
     "NaiveBayesClassifier", "SVMClassifier", "XGBClassifierWrapper", "make_classifier",
     "load_model", "save_model", "preprocess", "FAST_MODELS", "PUBLISHED_SIGMA_PS", "SweepResult",
-    "sigma_p_sweep", "TsaugAugmenter", "TsaugSettings", "tsaug_baseline", "tsaug_cross_validate",
+    "sigma_p_sweep", "TsaugAugmenter", "TsaugSettings", "tsaug_baseline", "tsaug_cross_validate", "tsaug_set",
     "CNNClassifier",
 ]
 

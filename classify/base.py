@@ -13,14 +13,6 @@ from ..radar import check_normalisation
 from .preprocess import as_profiles, preprocess
 
 
-def derive_seed(random_state, *keys: int) -> int:
-    """A 32-bit seed derived from the user's seed and ``keys`` (None -> fresh entropy)."""
-    if isinstance(random_state, np.random.Generator):
-        return int(random_state.integers(0, 2**31 - 1))
-    ss = np.random.SeedSequence(random_state, spawn_key=tuple(int(k) for k in keys))
-    return int(ss.generate_state(1)[0] & 0x7FFFFFFF)
-
-
 class ProfileClassifier:
     """Base class. Subclasses set ``name`` and implement ``_fit(X, yi)`` and
     ``_proba(X)`` on preprocessed float32 (N, L) profiles and integer labels

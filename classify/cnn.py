@@ -41,7 +41,8 @@ import numpy as np
 import torch
 from torch import nn
 from ..radar.progress import progress_bar
-from .base import ProfileClassifier, derive_seed
+from ..radar.seeds import child_seed
+from .base import ProfileClassifier
 
 SIDE = 20
 
@@ -136,7 +137,7 @@ class CNNClassifier(ProfileClassifier):
                 "monitor": self.monitor, "fractions": list(self.fractions)}
 
     def build(self, n_classes: int) -> ProfileCNN:
-        g = torch.Generator().manual_seed(derive_seed(self.random_state, 3))
+        g = torch.Generator().manual_seed(child_seed(self.random_state, 3))
         net = ProfileCNN(n_classes, hidden=self.hidden)
         with torch.no_grad():  # seeded re-initialisation with torch's default schemes
             for m in net.modules():
@@ -168,10 +169,10 @@ class CNNClassifier(ProfileClassifier):
     def _fit(self, X, yi, groups=None):
         x_all = self.to_tensor(X)
         y_all = torch.from_numpy(yi)
-        tr, va, te = split_indices(yi, self.fractions, groups, derive_seed(self.random_state, 4))
+        tr, va, te = split_indices(yi, self.fractions, groups, child_seed(self.random_state, 4))
         if tr.size == 0 or va.size == 0:
             raise ValueError(f"too few profiles ({yi.size}) for a {self.fractions} split")
-        shuffle = torch.Generator().manual_seed(derive_seed(self.random_state, 5))
+        shuffle = torch.Generator().manual_seed(child_seed(self.random_state, 5))
         with torch_threads(self.threads):
             self.net_ = self.build(len(self.classes_))
             opt = torch.optim.Adam(self.net_.parameters(), lr=self.learning_rate)

@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import ProfileClassifier, derive_seed, softmax
+from ..radar.seeds import child_seed
+from .base import ProfileClassifier, softmax
 
 SVM_KERNELS = ("rbf", "linear", "poly", "sigmoid")
 
@@ -41,7 +42,7 @@ class SVMClassifier(ProfileClassifier):
                 "probability": self.probability, "max_iter": self.max_iter}
 
     def _fit(self, X, yi):
-        seed = derive_seed(self.random_state, 1)
+        seed = child_seed(self.random_state, 1)
         if self.kernel == "linear" and not self.probability:
             from sklearn.svm import LinearSVC
 
@@ -115,7 +116,7 @@ class XGBClassifierWrapper(ProfileClassifier):
         return XGBClassifier(n_estimators=self.n_estimators, max_depth=self.max_depth,
                              learning_rate=self.learning_rate, max_bin=self.max_bin,
                              subsample=self.subsample, tree_method="hist", n_jobs=self.threads,
-                             random_state=derive_seed(self.random_state, 2), verbosity=0)
+                             random_state=child_seed(self.random_state, 2), verbosity=0)
 
     def _fit(self, X, yi):
         self.estimator_ = self._new_estimator().fit(X, yi)

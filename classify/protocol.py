@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..radar.seeds import child_seed
 from .metrics import evaluate
 from .models import make_classifier
 
@@ -39,9 +40,6 @@ PUBLISHED_SIGMA_PS = (0.0, 0.05, 0.10, 0.15, 0.20, 0.25, 0.30, 0.40, 0.50, 0.60)
 FAST_MODELS = ("svm", "nb", "xgb")
 METRICS = ("accuracy", "balanced_accuracy", "min_recall")
 
-
-def _seed(random_state, *keys) -> int:
-    return int(np.random.SeedSequence(random_state, spawn_key=tuple(keys)).generate_state(1)[0] >> 1)
 
 
 @dataclass
@@ -71,7 +69,7 @@ def run_sweep_job(job: SweepJob, on_cell=None) -> list[dict]:
             yt = model.check_labels(yt, source=f"test set {test_name}")
             model.check_input(xt, source=f"test set {test_name}")
             m = evaluate(yt, model.predict(xt), labels=model.classes_.tolist(), n_boot=job.n_boot,
-                         random_state=_seed(job.train_seed, 7))
+                         random_state=child_seed(job.train_seed, 7))
             recalls = {lab: pc["recall"] for lab, pc in m["per_class"].items() if pc["recall"] is not None}
             ci = m["ci"] or {}
             row = {"sigma_p": job.sigma_p, "model": name, "test_set": test_name,
@@ -260,8 +258,8 @@ def sigma_p_sweep(make_train, test_sets: dict, sigma_ps=PUBLISHED_SIGMA_PS, mode
     if not test_sets:
         raise ValueError("at least one test set is needed")
     model_params = model_params or {}
-    jobs = [SweepJob(index=i, sigma_p=s, train_seed=_seed(random_state, i),
-                     model_seeds={m: _seed(random_state, i, j + 1) for j, m in enumerate(models)},
+    jobs = [SweepJob(index=i, sigma_p=s, train_seed=child_seed(random_state, i),
+                     model_seeds={m: child_seed(random_state, i, j + 1) for j, m in enumerate(models)},
                      make_train=make_train, test_sets=dict(test_sets), models=models,
                      model_params=model_params, n_boot=n_boot)
             for i, s in enumerate(sigma_ps)]

@@ -5,9 +5,10 @@ paper gives no parameters, so ours are stated in :class:`TsaugSettings` (tsaug's
 README values for drift and reverse, tsaug's default pool).
 
 tsaug draws from a fixed seed identically on every call, so each
-:meth:`TsaugAugmenter.sample` call builds its pipeline with fresh seeds derived from
-the user's seed and a call counter: repeated calls differ, the same user seed
-replays the same sequence.
+:meth:`TsaugAugmenter.sample` call builds its pipeline with fresh seeds drawn from
+the generator: repeated calls differ, the same user seed replays the same sequence.
+:class:`TsaugAugmenter` has the toolkit's one augmenter interface
+(:mod:`mdaug.radar.batch`), so a tsaug set feeds any classifier.
 
 Leakage: augment only inside training folds. :func:`tsaug_baseline` augments exactly
 the profiles it is given (the caller's training fold), and the CNN's internal
@@ -21,6 +22,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..radar.batch import AugmentedBatch, Augmenter
+from ..radar.seeds import rng as rng_from
+from ..radar.seeds import child_seed, seed_sequence
 from .preprocess import as_profiles, preprocess
 
 
@@ -37,52 +41,65 @@ class TsaugSettings:
     reverse_prob: float = 0.5
 
 
-class TsaugAugmenter:
-    """Balanced tsaug augmentation of measured profiles (N, L) with labels (N,).
+class TsaugAugmenter(Augmenter):
+    """tsaug augmentation of the measured profiles of one class.
 
-    ``sample(n_per_class)`` returns ``(X (n_per_class * n_classes, L) float32, y)``;
-    every source profile of a class is used about equally often (round-robin over a
-    fresh permutation). Profiles are normalised with ``normalisation`` before
-    augmentation so measured profiles of different amplitude are treated alike.
-    """
+    profiles (N, L) and labels (N,) are the measurements; the augmenter keeps those of
+    class ``label`` and ``sample(n, rng)`` returns an :class:`AugmentedBatch` of n
+    augmented profiles (float32) of that class, ``sources`` the index (into the given
+    profiles) of each one's source; every source is used about equally often
+    (round-robin over a fresh permutation). Profiles are normalised with
+    ``normalisation`` before augmentation so measurements of different amplitude are
+    treated alike. tsaug draws identically under a fixed seed, so every call builds
+    its pipeline with fresh seeds from the generator."""
 
-    def __init__(self, profiles, labels, random_state=None, settings: TsaugSettings = TsaugSettings(),
+    def __init__(self, profiles, labels, label: str, random_state=None, settings: TsaugSettings = TsaugSettings(),
                  normalisation: str = "peak"):
-        self.profiles = preprocess(as_profiles(profiles, "tsaug source profiles"), normalisation)
-        self.labels = np.asarray(labels).astype(str).ravel()
-        if self.labels.size != self.profiles.shape[0]:
-            raise ValueError(f"{self.profiles.shape[0]} profiles but {self.labels.size} labels")
-        self.classes = np.unique(self.labels)
-        self.settings = settings
+        x = preprocess(as_profiles(profiles, "tsaug source profiles"), normalisation)
+        y = np.asarray(labels).astype(str).ravel()
+        if y.size != x.shape[0]:
+            raise ValueError(f"{x.shape[0]} profiles but {y.size} labels")
+        self.label = str(label)
+        self.rows = np.flatnonzero(y == self.label)
+        if not self.rows.size:
+            raise ValueError(f"no tsaug source profile of class {self.label!r} (classes: {sorted(set(y.tolist()))})")
+        self.profiles = x
+        self.tsaug = settings
         self.normalisation = normalisation
-        self._seq = np.random.SeedSequence(random_state)
-        self.last_sources_: np.ndarray | None = None
+        self._rng = rng_from(random_state)
 
     def _pipeline(self, seeds):
         from tsaug import Drift, Pool, Reverse
 
-        s = self.settings
+        s = self.tsaug
         return (Drift(max_drift=s.max_drift, n_drift_points=s.n_drift_points, seed=int(seeds[0])) @ s.drift_prob
                 + Pool(size=s.pool_size, seed=int(seeds[1]))
                 + Reverse(seed=int(seeds[2])) @ s.reverse_prob)
 
-    def sample(self, n_per_class: int, return_sources: bool = False):
-        """Augmented profiles (n_per_class per class) and their labels; with
-        ``return_sources`` also the index (into the given profiles) of each one's source."""
-        if isinstance(n_per_class, bool) or int(n_per_class) != n_per_class or n_per_class <= 0:
-            raise ValueError(f"n_per_class must be a positive integer, got {n_per_class!r}")
-        child = self._seq.spawn(1)[0]  # fresh per call: tsaug repeats itself under a fixed seed
-        rng = np.random.default_rng(child)
-        sources = np.concatenate([
-            np.resize(rng.permutation(np.flatnonzero(self.labels == c)), int(n_per_class)) for c in self.classes])
+    def sample(self, n: int, rng=None, **kw) -> AugmentedBatch:
+        if isinstance(n, bool) or int(n) != n or n <= 0:
+            raise ValueError(f"n (profiles to make) must be a positive integer, got {n!r}")
+        rng = self._rng if rng is None else rng_from(rng)
+        sources = np.resize(rng.permutation(self.rows), int(n))
         seeds = rng.integers(0, 2**31 - 1, size=3)
         x = self._pipeline(seeds).augment(self.profiles[sources].astype(np.float64)).astype(np.float32)
-        self.last_sources_ = sources
-        out = (x, self.labels[sources])
-        return out + (sources,) if return_sources else out
+        return AugmentedBatch(profiles=x, labels=np.full(int(n), self.label), params=None,
+                              settings=self.settings(), sources=sources)
 
-    def settings_dict(self) -> dict:
-        return {"strategy": "tsaug", **asdict(self.settings), "normalisation": self.normalisation}
+    def settings(self) -> dict:
+        return {"strategy": "tsaug", **asdict(self.tsaug), "normalisation": self.normalisation,
+                "n_sources": int(self.rows.size)}
+
+
+def tsaug_set(profiles, labels, n_per_class: int, random_state=None, settings: TsaugSettings = TsaugSettings(),
+              normalisation: str = "peak"):
+    """A balanced tsaug training set: (X (n_per_class x classes, L), y, sources) from one
+    augmenter per class, each class from its own child stream of ``random_state``."""
+    y = np.asarray(labels).astype(str).ravel()
+    parts = [TsaugAugmenter(profiles, y, c, settings=settings, normalisation=normalisation).sample(
+        n_per_class, rng_from(random_state, "tsaug", c)) for c in np.unique(y)]
+    return (np.concatenate([p.profiles for p in parts]), np.concatenate([p.labels for p in parts]),
+            np.concatenate([p.sources for p in parts]))
 
 
 def tsaug_baseline(train_profiles, train_labels, n_per_class: int = 16000, random_state=None,
@@ -95,14 +112,12 @@ def tsaug_baseline(train_profiles, train_labels, n_per_class: int = 16000, rando
     """
     from .cnn import CNNClassifier
 
-    seed = np.random.SeedSequence(random_state)
-    aug_seed, cnn_seed = (int(s.generate_state(1)[0]) for s in seed.spawn(2))
-    aug = TsaugAugmenter(train_profiles, train_labels, random_state=aug_seed, settings=settings,
-                         normalisation=cnn_params.get("normalisation", "peak"))
-    x, y, sources = aug.sample(n_per_class, return_sources=True)
-    model = CNNClassifier(epochs=epochs, random_state=cnn_seed, **cnn_params)
+    x, y, sources = tsaug_set(train_profiles, train_labels, n_per_class, seed_sequence(random_state, "augment"),
+                              settings, cnn_params.get("normalisation", "peak"))
+    model = CNNClassifier(epochs=epochs, random_state=int(seed_sequence(random_state, "cnn").generate_state(1)[0]),
+                          **cnn_params)
     model.fit(x, y, groups=sources)
-    model.augmenter_settings_ = aug.settings_dict()
+    model.augmenter_settings_ = {"strategy": "tsaug", **asdict(settings)}
     return model
 
 
@@ -115,13 +130,11 @@ def tsaug_cross_validate(profiles, labels, n_splits: int = 5, n_per_class: int =
 
     x = as_profiles(profiles, "measured profiles")
     y = np.asarray(labels).astype(str).ravel()
-    folds = StratifiedKFold(n_splits=n_splits, shuffle=True,
-                            random_state=int(np.random.SeedSequence(random_state).generate_state(1)[0] >> 1))
+    folds = StratifiedKFold(n_splits=n_splits, shuffle=True, random_state=child_seed(random_state, "folds"))
     pred = np.empty(y.size, dtype=y.dtype)
     fold_id = np.empty(y.size, dtype=np.int64)
     for k, (tr, te) in enumerate(folds.split(x, y)):
-        seed = np.random.SeedSequence(random_state, spawn_key=(k,))
-        model = tsaug_baseline(x[tr], y[tr], n_per_class, int(seed.generate_state(1)[0]), epochs=epochs, **kw)
+        model = tsaug_baseline(x[tr], y[tr], n_per_class, seed_sequence(random_state, "fold", k), epochs=epochs, **kw)
         pred[te] = model.predict(x[te])
         fold_id[te] = k
     return pred, fold_id

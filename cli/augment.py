@@ -1,15 +1,20 @@
-"""``mdaug augment``: synthesise a training set, sigma_P or from calibrated posteriors.
+"""``mdaug augment``: synthesise a training set from class vectors rendered through an acquisition.
 
-Options of the augmenters belong here; the nuisance/acquisition options shared with
-``mdaug sweep`` are in :func:`.common.add_nuisance_options`.
+Sources of class vectors: sigma_P around the packaged references (``--classes``),
+sigma_P around a calibration's best fit (``--fit CLASS=post.nc``), posterior draws
+(``--posterior CLASS=post.nc``); any of them widened by the specimen model
+(``--specimen-width``). They are rendered under the acquisition (the calibration's
+by default, with the carrier and noise it measured; options in
+:func:`.common.add_acquisition_options`), by the fast path or through the scene
+simulator and the radar chain (``--through-chain``).
 """
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from .common import (SIGN_POLICIES, add_nuisance_options, add_verb, class_list, info, nuisance_from_args,
-                     positive_int, result, seed_int, unit_fraction, warn)
+from .common import (SIGN_POLICIES, acquisition_from_args, acquisition_given, add_acquisition_options, add_verb,
+                     class_list, info, nonneg_float, positive_int, result, seed_int, unit_fraction, warn)
 
 DEFAULT_CLASSES = ("HELI", "QUAD")
 DEFAULT_SIGMA_P = 0.2
@@ -24,32 +29,55 @@ def posterior_arg(text: str) -> tuple[str, Path]:
 
 def augmenters_from_args(args) -> tuple[list, dict | None]:
     """The augmenters the options ask for, and the settings they add to the file."""
-    from ..radar import RadarConfig
+    from ..generator import Renderer, SigmaPSource, SpecimenSource, SpecimenSpread
+    from ..generator.augment import ModelAugmenter
 
-    nuisance = nuisance_from_args(args)
-    if args.posterior:
-        from ..inference import PosteriorAugmenter
-
-        if args.classes is not None or args.sigma_p is not None:
-            given = [o for o, v in (("--classes", args.classes), ("--sigma-p", args.sigma_p)) if v is not None]
-            raise ValueError(f"--posterior draws from the posteriors' classes; drop {' and '.join(given)}")
-        names = [c for c, _ in args.posterior]
-        if len(set(names)) != len(names):
-            raise ValueError(f"--posterior names a class twice: {names}")
-        augs = [PosteriorAugmenter(path, label=cls, nuisance=nuisance, normalisation=args.normalisation,
-                                   dtype=args.dtype) for cls, path in args.posterior]
-        for a in augs:
-            if not a.posterior.converged:
-                warn("augment", f"posterior of {a.label} ({a.source}) did not converge: "
-                                f"{a.posterior.diagnostics['reason']}")
-        return augs, {"strategy": "posterior", "posteriors": {c: str(p) for c, p in args.posterior}}
-    from ..generator import SigmaPAugmenter
-
+    fits, posts = args.fit or [], args.posterior or []
+    names = [c for c, _ in fits + posts]
+    if len(set(names)) != len(names):
+        raise ValueError(f"--fit/--posterior name a class twice: {names}")
+    if names and args.classes is not None:
+        raise ValueError("--fit/--posterior give the classes; drop --classes")
+    if posts and args.sigma_p is not None and not fits:
+        raise ValueError("--sigma-p applies to sigma_P sources (--classes or --fit), not to --posterior")
     sigma_p = DEFAULT_SIGMA_P if args.sigma_p is None else args.sigma_p
-    classes = list(DEFAULT_CLASSES) if args.classes is None else args.classes
-    return [SigmaPAugmenter(c, sigma_p, sign_policy=args.sign_policy, nuisance=nuisance,
-                            normalisation=args.normalisation, dtype=args.dtype, radar=RadarConfig())
-            for c in classes], None
+    specimens = None if args.specimen_width is None else SpecimenSpread(width=args.specimen_width)
+
+    def renderer(acq):
+        return Renderer(acq, args.normalisation, args.dtype, through_chain=args.through_chain)
+
+    def finish(source, acq):
+        if specimens is not None:
+            source = SpecimenSource(source, specimens)
+        return ModelAugmenter(source, renderer(acq))
+
+    augs, extra = [], {}
+    if names:
+        from ..inference.posterior_augment import PosteriorSource, load_posterior
+
+        for cls, path in fits + posts:
+            post = load_posterior(path, cls)
+            if not post.converged:
+                warn("augment", f"posterior of {cls} ({path}) did not converge: {post.diagnostics['reason']}")
+            acq, perturb = acquisition_from_args(args, post.measured_acquisition())
+            if (cls, path) in fits:
+                src = SigmaPSource(post.best_fit, sigma_p, sign_policy=args.sign_policy, perturb_phases=perturb,
+                                   label=cls)
+            else:
+                src = PosteriorSource(post, label=cls)
+            augs.append(finish(src, acq))
+        extra = {"strategy": "+".join(sorted({"sigma_p_fit" if f in fits else "posterior" for f in fits + posts})),
+                 "posteriors": {c: str(p) for c, p in fits + posts}}
+    else:
+        acq, perturb = acquisition_from_args(args)
+        classes = list(DEFAULT_CLASSES) if args.classes is None else args.classes
+        augs = [finish(SigmaPSource(c, sigma_p, sign_policy=args.sign_policy, perturb_phases=perturb), acq)
+                for c in classes]
+        extra = {"strategy": "sigma_p"}
+    if specimens is not None:
+        extra["specimens"] = specimens.to_dict()
+    extra["acquisition_from"] = "options" if acquisition_given(args) else ("calibration" if names else "default")
+    return augs, extra
 
 
 def run_augment(args) -> int:
@@ -91,21 +119,32 @@ def _interrupted(args) -> str:
 
 def add_augment(sub, parents, help):
     p = add_verb(sub, "augment", parents, help=help, interrupted=_interrupted,
-                 description="Synthesise range profiles: by perturbing the class reference vectors with the "
-                             "published relative Gaussian (sigma_P), or by drawing from calibrated posteriors "
-                             "(--posterior). Writes one NPZ (profiles, labels, the parameter vectors, settings); "
-                             "it appears only when complete.")
-    g = p.add_argument_group("strategy")
+                 description="Synthesise range profiles: class vectors (sigma_P around the references or a "
+                             "calibrated best fit, or posterior draws, optionally widened for other specimens) "
+                             "rendered through the acquisition (the calibration's by default). Writes one NPZ "
+                             "(profiles, labels, the parameter vectors, settings, the acquisition); it appears only "
+                             "when complete.")
+    g = p.add_argument_group("class vectors")
     g.add_argument("--classes", type=class_list, default=None, metavar="LIST",
-                   help="sigma_P: comma-separated class references (default: HELI,QUAD)")
+                   help="sigma_P around these packaged class references, comma-separated (default: HELI,QUAD "
+                        "when no --fit/--posterior)")
+    g.add_argument("--fit", type=posterior_arg, action="append", default=None, metavar="CLASS=FILE",
+                   help="sigma_P around the calibrated best fit of a posterior NetCDF (the published method on "
+                        "your measurements); repeat per class (default: none)")
     g.add_argument("--sigma-p", type=unit_fraction, default=None, metavar="S",
                    help=f"sigma_P: relative perturbation x_i + N(0, S |x_i|), 0..1 (default: {DEFAULT_SIGMA_P})")
+    g.add_argument("--specimen-width", type=nonneg_float, default=None, metavar="W",
+                   help="widen every source by the specimen model (common motor-speed factor 5%%, amplitudes "
+                        "15%%, ... times W) for drones other than the one calibrated (default: none)")
     g.add_argument("--sign-policy", choices=SIGN_POLICIES, default="reflect",
                    help="sigma_P: a draw that flips a non-negative parameter's sign is reflected to |x|, "
                         "redrawn (truncate) or kept (default: %(default)s)")
     g.add_argument("--posterior", type=posterior_arg, action="append", default=None, metavar="CLASS=FILE",
-                   help="draw from a calibrated posterior NetCDF instead of sigma_P; repeat per class "
-                        "(default: none, i.e. sigma_P)")
+                   help="draw from a calibrated posterior NetCDF; repeat per class (default: none)")
+    g.add_argument("--through-chain", action="store_true",
+                   help="render each vector as a raw acquisition of the scene simulator processed by the radar "
+                        "chain (MTI, angle integration, extraction), about 2 ms per profile at K = 32 (default: "
+                        "the fast path, f(x) under the acquisition)")
     g = p.add_argument_group("size and output")
     g.add_argument("--n-per-class", type=positive_int, default=16000, metavar="N",
                    help="profiles per class (16000 x 2 classes is the published 32,000; about 1.6 KB of "
@@ -114,11 +153,12 @@ def add_augment(sub, parents, help):
                    help="random seed; the same seed gives the same file bytes (default: %(default)s)")
     g.add_argument("--out", type=Path, required=True, help="output NPZ")
     g.add_argument("--plot", type=Path, default=None, help="also write a PNG of the profiles (default: none)")
-    add_nuisance_options(p)
+    add_acquisition_options(p)
     p.set_defaults(func=run_augment)
     return p
 
 
 VERBS = {
-    "augment": ("synthesise a training set (sigma_P, or from calibrated posteriors)", add_augment),
+    "augment": ("synthesise a training set (sigma_P, a calibrated fit or posterior, through the acquisition)",
+                add_augment),
 }

@@ -10,7 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import add_verb, info, positive_int, result, seed_int, warn
+from .common import (acquisition_from_args, acquisition_given, add_acquisition_options, add_verb, info,
+                     positive_float, positive_int, result, seed_int, warn)
 
 EXIT_NOT_CONVERGED = 3
 
@@ -73,14 +74,37 @@ def run_calibrate(args) -> int:
     overrides = {k: v for k, v in {"max_steps": args.max_steps, "fit_budget": args.fit_budget,
                                    "n_starts": args.starts, "n_walkers": args.walkers,
                                    "fit_algorithm": args.fit_algorithm, "normalisation": args.normalisation,
-                                   "sampler": args.sampler, "n_particles": args.particles}.items()
+                                   "sampler": args.sampler, "n_particles": args.particles,
+                                   "time_budget": args.time_budget, "likelihood": args.likelihood,
+                                   "n_acquisitions": args.draws, "ramps_drawn": args.ramps_drawn}.items()
                  if v is not None}
+    from ..generator.acquisition import acquisition_from_file
+
+    from_file = acquisition_from_file(data.extra, str(args.measured))
+    if from_file is not None and args.ramps is not None and args.ramps != from_file.ramps:
+        raise ValueError(f"{args.measured} says ramps_per_frame = {from_file.ramps} but --ramps says {args.ramps}; "
+                         "make them agree (or drop --ramps)")
+    acquisition, _ = acquisition_from_args(args, from_file)
+    source = ("from the options" if acquisition_given(args) else
+              f"as {args.measured} states it" if from_file is not None else "the published single chirp (default)")
     settings = base.replace(threads=args.threads, progress=progress_enabled(),
                             range_offset=not args.no_range_offset, **overrides)
     info(f"calibrating {args.class_name.upper()} from {len(profiles)} profile(s) of {args.measured} "
          f"(engines {args.engines or 'reference'}, seed {args.seed}; chain checkpoint {backend})")
-    res = calibrate(profiles, args.class_name.upper(), engines=args.engines, settings=settings,
-                    random_state=args.seed, backend_path=backend)
+    result(f"acquisition ({source}): {acquisition.describe()}")
+    if len(profiles) == 1:
+        warn("calibrate", "one profile only: the posterior is weakly identified (the supported case is a handful "
+                          "of measurements, typically 5)")
+    if args.engines == "auto":
+        from ..inference.compare import select_engines
+
+        res = select_engines(profiles, args.class_name.upper(), settings=settings, random_state=args.seed,
+                             backend_path=backend, acquisition=acquisition)
+    else:
+        res = calibrate(profiles, args.class_name.upper(), engines=args.engines, settings=settings,
+                        acquisition=acquisition, random_state=args.seed, backend_path=backend)
+    if res.diagnostics.get("resumed_at") or res.diagnostics.get("fit_reused"):
+        result(f"resumed from {backend}: fit reused, sampler continued at step {res.diagnostics.get('resumed_at', 0)}")
     res.save(args.out)
     result(res.report())
     result(f"wrote {args.out}")
@@ -135,6 +159,9 @@ def add_calibrate(sub, parents, help):
     g.add_argument("--sampler", choices=SAMPLERS, default=None,
                    help="emcee: ensemble from the fit, run to 50 tau; smc: tempered SMC from the prior with "
                         f"mode jumps, for multimodal posteriors, gives the evidence (default: {d.sampler})")
+    g.add_argument("--time-budget", type=positive_float, default=None, metavar="SECONDS",
+                   help="stop sampling after this many seconds when not converged before (the run is then "
+                        f"flagged not converged; rerun to continue) (default: {d.time_budget:g})")
     g.add_argument("--max-steps", type=positive_int, default=None, metavar="N",
                    help=f"emcee step budget, steps per walker (default: {_cap(d.max_steps)}; --quick: "
                         f"{_cap(q.max_steps)})")
@@ -150,6 +177,15 @@ def add_calibrate(sub, parents, help):
                         f"{q.fit_budget})")
     g.add_argument("--fit-algorithm", choices=FIT_ALGORITHMS, default=None, metavar="NAME",
                    help=f"nlopt global algorithm, one of {', '.join(FIT_ALGORITHMS)} (default: {d.fit_algorithm})")
+    g.add_argument("--likelihood", choices=("auto", "marginal", "fitted"), default=None,
+                   help="auto: marginalise the phases when the acquisition randomises them or averages ramps "
+                        "(a Gaussian synthetic likelihood), fit them for the published single chirp; or force "
+                        f"one (default: {d.likelihood})")
+    g.add_argument("--draws", type=positive_int, default=None, metavar="O",
+                   help=f"marginal likelihood: simulated acquisitions per evaluation (default: {d.n_acquisitions})")
+    g.add_argument("--ramps-drawn", type=positive_int, default=None, metavar="I",
+                   help=f"marginal likelihood: ramps simulated per acquisition, at most K (default: {d.ramps_drawn})")
+    add_acquisition_options(p, relative=False, profile_options=False)
     g = p.add_argument_group("model")
     g.add_argument("--normalisation", choices=NORMALISATIONS, default=None,
                    help=f"normalisation of measured and model profiles (default: {d.normalisation})")

@@ -10,7 +10,7 @@ import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from .common import (add_classifier_options, add_nuisance_options, add_verb, check_out_folder,
+from .common import (add_classifier_options, acquisition_from_args, add_acquisition_options, add_verb, check_out_folder,
                      check_training_memory, class_list, count_2, csv_list, info, load_profile_file, model_list,
                      model_params, nonneg_int, nothing_written, positive_int, result, seed_int, sigma_list)
 
@@ -117,13 +117,12 @@ def add_evaluate(sub, parents, help):
 @dataclass(frozen=True)
 class SyntheticTrainSet:
     """Picklable ``make_train(sigma_p, seed) -> (X, y)`` for the sweep: sigma_P sets
-    of ``classes`` with the given nuisances (``n_per_class`` profiles per class)."""
+    of ``classes`` under the given acquisition (``n_per_class`` profiles per class)."""
 
     classes: tuple
     n_per_class: int
-    phases: str = "relative"
-    range_jitter_bins: float = 0.0
-    n_ramps: int = 1
+    acquisition: dict = None
+    perturb_phases: bool = True
     normalisation: str = "peak"
     dtype: str = "float32"
     sign_policy: str = "reflect"
@@ -133,11 +132,12 @@ class SyntheticTrainSet:
         return json.dumps(asdict(self), sort_keys=True)
 
     def __call__(self, sigma_p: float, seed: int):
-        from ..generator import Nuisance, SigmaPAugmenter, make_dataset
+        from ..generator import Acquisition, SigmaPAugmenter, make_dataset
 
-        nuisance = Nuisance(phases=self.phases, range_jitter_bins=self.range_jitter_bins, n_ramps=self.n_ramps)
-        augs = [SigmaPAugmenter(c, sigma_p, sign_policy=self.sign_policy, nuisance=nuisance,
-                                normalisation=self.normalisation, dtype=self.dtype) for c in self.classes]
+        acq = Acquisition.from_dict(self.acquisition or {})
+        augs = [SigmaPAugmenter(c, sigma_p, sign_policy=self.sign_policy, perturb_phases=self.perturb_phases,
+                                acquisition=acq, normalisation=self.normalisation, dtype=self.dtype)
+                for c in self.classes]
         ds = make_dataset(augs, self.n_per_class, seed, progress=False)
         return ds.profiles, ds.labels
 
@@ -163,9 +163,10 @@ def run_sweep(args) -> int:
         if name in tests:
             raise ValueError(f"--test: two test files share the name {name!r}; rename one")
         tests[name] = (ps.profiles, ps.labels)
-    make_train = SyntheticTrainSet(tuple(args.classes), args.n_per_class, phases=args.phases,
-                                   range_jitter_bins=args.range_jitter, n_ramps=args.ramps,
-                                   normalisation=args.normalisation, dtype=args.dtype, sign_policy=args.sign_policy)
+    acq, perturb = acquisition_from_args(args)
+    make_train = SyntheticTrainSet(tuple(args.classes), args.n_per_class, acquisition=acq.to_dict(),
+                                   perturb_phases=perturb, normalisation=args.normalisation, dtype=args.dtype,
+                                   sign_policy=args.sign_policy)
     params = {m: model_params(args, m) for m in args.models}
     out.mkdir(parents=True, exist_ok=True)
     executor = None
@@ -232,7 +233,7 @@ def add_sweep(sub, parents, help):
     p.add_argument("--workers", type=positive_int, default=1, metavar="N",
                    help="parallel processes, one sigma_P point each (default: %(default)s)")
     p.add_argument("--no-resume", action="store_true", help="ignore results of an earlier run in --out/jobs")
-    add_nuisance_options(p)
+    add_acquisition_options(p)
     add_classifier_options(p, normalisation=False)
     p.set_defaults(func=run_sweep)
     return p
@@ -245,11 +246,12 @@ def run_baseline(args) -> int:
     from ..classify.tsaug_baseline import tsaug_baseline, tsaug_cross_validate
     from ..radar import DataFileError, atomic_write, check_outputs
 
-    if args.folds is None and args.out is None:
-        raise ValueError("give --out MODEL (train on all of DATA) or --folds K (cross-validate on DATA)")
+    if args.folds is None and args.out is None and args.out_set is None:
+        raise ValueError("give --out MODEL (train on all of DATA), --out-set NPZ (write the tsaug training set) "
+                         "or --folds K (cross-validate on DATA)")
     if args.test and args.out is None:
         raise ValueError("--test scores the model trained on all of DATA: give --out MODEL too")
-    check_outputs(args.out, args.json)
+    check_outputs(args.out, args.json, args.out_set)
     data = load_profile_file(args.data, length=CNN_BINS, why="the CNN (1 x 20 x 20 input)")
     if len(data.classes) < 2:
         raise DataFileError(f"{args.data}: field 'labels' holds only class(es) {data.classes}; training needs "
@@ -266,6 +268,23 @@ def run_baseline(args) -> int:
         tests[path] = test
     params = {k: v for k, v in model_params(args, "cnn").items() if k != "epochs"}
     report = {}
+    if args.out_set is not None:  # the tsaug set itself, so that any classifier can train on it
+        import numpy as np
+
+        from ..classify.tsaug_baseline import TsaugSettings, tsaug_set
+        from ..generator.dataset import SyntheticDataset, save_dataset
+        from ..radar.seeds import seed_sequence
+
+        xs, ys, src = tsaug_set(data.profiles, data.labels, args.n_per_class, seed_sequence(args.seed, "augment"),
+                                normalisation=args.normalisation)
+        from dataclasses import asdict
+
+        ds = SyntheticDataset(profiles=xs, labels=ys, params={}, param_row=np.full(len(ys), -1),
+                              settings={"strategy": "tsaug", "seed": args.seed, "source_file": str(args.data),
+                                        "tsaug": asdict(TsaugSettings()), "normalisation": args.normalisation,
+                                        "n_per_class": args.n_per_class, "classes": sorted(set(ys.tolist()))})
+        save_dataset(args.out_set, ds)
+        result(f"wrote {args.out_set}: {len(ys)} tsaug profiles of {len(data)} measured ones")
     if args.folds is not None:
         info(f"tsaug baseline, {args.folds}-fold cross-validation on {args.data} ({len(data)} profiles); "
              f"augmenting only inside each training fold")
@@ -303,6 +322,9 @@ def add_baseline(sub, parents, help):
                    help="k-fold cross-validation on DATA, K >= 2 (default: none)")
     p.add_argument("--n-per-class", type=positive_int, default=16000, metavar="N",
                    help="augmented profiles per class (default: %(default)s)")
+    p.add_argument("--out-set", type=Path, default=None, metavar="NPZ",
+                   help="also write the tsaug training set (profiles + labels, the synthetic-dataset format), so "
+                        "any classifier (mdaug train) can use it (default: none)")
     p.add_argument("--json", type=Path, default=None, help="also write the metrics as JSON (default: none)")
     p.add_argument("--seed", type=seed_int, default=0, help="seed of augmentation and CNN (default: %(default)s)")
     add_classifier_options(p, epochs_default=100, cnn_only=True)

@@ -19,7 +19,9 @@ import sys
 from pathlib import Path
 
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")
-NUISANCE_PHASES = ("relative", "uniform", "fixed")  # checked against mdaug.generator.PHASE_TREATMENTS in tests
+NUISANCE_PHASES = ("relative", "uniform", "fixed")  # relative = fixed + the sigma_P phase perturbation
+ACQUISITION_PHASES = ("fixed", "uniform")  # checked against mdaug.generator.PHASE_TREATMENTS in tests
+ACQUISITION_PRESETS = ("published", "measured")
 NORMALISATIONS = ("peak", "db", "l2", "none")  # checked against mdaug.radar.NORMALISATIONS in tests
 SIGN_POLICIES = ("reflect", "truncate", "keep")  # checked against mdaug.generator.SIGN_POLICIES in tests
 DTYPES = ("float32", "float64")
@@ -149,6 +151,21 @@ def sigma_list(text: str) -> list[float]:
     return out
 
 
+def nonneg_pair(text: str) -> tuple[float, float]:
+    """'LO,HI' with 0 <= LO <= HI."""
+    lo, hi = float_pair(text)
+    if lo < 0:
+        raise argparse.ArgumentTypeError(f"expected LOW,HIGH >= 0, got {text!r}")
+    return lo, hi
+
+
+def noise_pair(text: str):
+    """'LO,HI' in dB, or 'none'."""
+    if text.strip().lower() == "none":
+        return "none"
+    return float_pair(text)
+
+
 def float_pair(text: str) -> tuple[float, float]:
     """'LO,HI' (or LO:HI) with LO <= HI."""
     parts = [t for t in text.replace(":", ",").split(",") if t.strip()]
@@ -202,22 +219,38 @@ def global_options(top: bool) -> Parser:
 
 
 # ---- shared option groups ------------------------------------------------------------
-def add_nuisance_options(p, *, output: bool = True) -> None:
-    """What an acquisition randomises beyond the class vector (SPEC 3.1), and the
-    profiles' normalisation and precision. Shared by augment and sweep: add options
-    of the acquisition here and both verbs get them."""
-    g = p.add_argument_group("acquisition nuisances (SPEC 3.1)")
-    g.add_argument("--phases", choices=NUISANCE_PHASES, default="relative",
-                   help="vibration phases: relative (published: phi + N(0, sigma_P |phi|)), uniform on the "
-                        "circle, or fixed (default: %(default)s)")
-    g.add_argument("--range-jitter", type=nonneg_float, default=0.0, metavar="BINS",
-                   help="width of the uniform sub-bin jitter of the target range, in FFT bins (48.8 Hz "
-                        "each; default: %(default)s = none)")
-    g.add_argument("--ramps", type=positive_int, default=1, metavar="K",
-                   help="ramps whose magnitude spectra are averaged incoherently, phases advancing by w x "
-                        "2.88 ms between ramps (default: %(default)s)")
-    if output:
-        g = p.add_argument_group("profiles")
+def add_acquisition_options(p, *, relative: bool = True, profile_options: bool = True) -> None:
+    """The acquisition (SPEC 3.2): a preset and its terms, all optional (None = not
+    given). Shared by augment, sweep and calibrate: add an acquisition option here and
+    every verb gets it. ``relative`` offers the published sigma_P phase treatment."""
+    g = p.add_argument_group("acquisition (SPEC 3.2; what a measured profile averages and randomises)")
+    g.add_argument("--acquisition", choices=ACQUISITION_PRESETS, default=None,
+                   help="preset: published = one chirp at the vector's phases (f(x) itself); measured = a "
+                        "campaign through the published chain (random phases per frame, 1 bin of sub-bin jitter, "
+                        "body return 0-0.3, noise -48..-42 dB, yaw +-15 deg, MTI over 10 frames) (default: the "
+                        "data file's, else published)")
+    phases = NUISANCE_PHASES if relative else ACQUISITION_PHASES
+    g.add_argument("--phases", choices=phases, default=None,
+                   help="vibration phases per frame: uniform (random), fixed (the vector's)"
+                        + (", relative (published: fixed, and sigma_P perturbs them: phi + N(0, sigma_P |phi|))"
+                           if relative else "") + " (default: the preset's)")
+    g.add_argument("--ramps", type=positive_int, default=None, metavar="K",
+                   help="ramps per frame, averaged incoherently, phases advancing by w x 2.88 ms between ramps "
+                        "(default: the data file's ramps_per_frame, else 1)")
+    g.add_argument("--range-jitter", type=nonneg_float, default=None, metavar="BINS",
+                   help="width of the uniform sub-bin jitter of the target range, FFT bins (default: the preset's)")
+    g.add_argument("--carrier", type=nonneg_pair, default=None, metavar="LO,HI",
+                   help="return at the carrier (body, hub), uniform in LO..HI x sum(Gamma) (default: the preset's)")
+    g.add_argument("--noise-db", type=noise_pair, default=None, metavar="LO,HI|none",
+                   help="noise floor, uniform in LO..HI dB relative to an unmodulated carrier line "
+                        "(write --noise-db=-48,-42: a leading minus needs the =), or none (default: the preset's)")
+    g.add_argument("--yaw-deg", type=nonneg_float, default=None, metavar="DEG",
+                   help="yaw uniform in +-DEG mixes roll and pitch amplitudes (default: the preset's)")
+    g.add_argument("--mti-depth", type=nonneg_int, default=None, metavar="N",
+                   help="MTI over the N previous frames (its residual); 0 = none (default: the preset's)")
+    if not profile_options:
+        return
+    g = p.add_argument_group("profiles")
     g.add_argument("--normalisation", choices=NORMALISATIONS, default="peak",
                    help="normalisation of every profile: peak = 1, dB re peak, unit L2 norm, or none "
                         "(default: %(default)s)")
@@ -226,10 +259,37 @@ def add_nuisance_options(p, *, output: bool = True) -> None:
                         "(default: %(default)s)")
 
 
-def nuisance_from_args(args):
-    from ..generator import Nuisance
+ACQUISITION_FIELDS = {"ramps": "ramps", "range_jitter": "range_jitter_bins", "carrier": "carrier",
+                      "noise_db": "noise_db", "yaw_deg": "yaw_deg", "mti_depth": "mti_depth"}
 
-    return Nuisance(phases=args.phases, range_jitter_bins=args.range_jitter, n_ramps=args.ramps)
+
+def acquisition_given(args) -> bool:
+    """Whether any acquisition option was given on the command line."""
+    return any(getattr(args, k, None) is not None for k in ("acquisition", "phases", *ACQUISITION_FIELDS))
+
+
+def acquisition_from_args(args, base=None):
+    """(Acquisition, perturb_phases) from the options over ``base`` (a file's acquisition
+    or None): the preset (or base, else published) with every given term replaced.
+    ``perturb_phases``: the published sigma_P phase treatment (``--phases relative``,
+    the default of the published preset)."""
+    from ..generator.acquisition import Acquisition
+
+    if args.acquisition == "measured":
+        acq = Acquisition.measured(args.ramps or (base.ramps if base is not None else 1))
+    elif args.acquisition == "published":
+        acq = Acquisition()
+    else:
+        acq = base if base is not None else Acquisition()
+    changes = {field: getattr(args, opt) for opt, field in ACQUISITION_FIELDS.items()
+               if getattr(args, opt, None) is not None}
+    if changes.get("noise_db") == "none":
+        changes["noise_db"] = None
+    phases = getattr(args, "phases", None)
+    perturb = phases == "relative" or (phases is None and acq.phases == "fixed" and acq.is_published)
+    if phases is not None:
+        changes["phases"] = "fixed" if phases == "relative" else phases
+    return (acq.replace(**changes) if changes else acq), perturb
 
 
 def add_chain_options(p) -> None:

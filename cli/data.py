@@ -7,7 +7,7 @@ from pathlib import Path
 from .common import (DTYPES, add_chain_options, add_verb, chain_from_args, finite_float, float_pair,
                      info, nonneg_float, nonneg_int, nothing_written, positive_int, result, seed_int)
 
-SCENE_PHASES = ("uniform", "fixed")  # checked against mdaug.generator.scene.SCENE_PHASES in tests
+SCENE_PHASES = ("fixed", "uniform")  # checked against mdaug.generator.scene.SCENE_PHASES in tests
 
 
 def _pair(v) -> str:

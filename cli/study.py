@@ -11,16 +11,6 @@ from pathlib import Path
 from .common import add_verb, check_out_folder, format_table, info, positive_int, result, seed_int, warn
 
 
-def stage_names(cfg) -> list[str]:
-    """The stages a study of ``cfg`` runs, in order (for the progress bar's total)."""
-    p = cfg.protocol
-    names = ["data", *(f"calibrate_{c}" for c in cfg.classes), *(f"sweep_{n}" for n in p.nuisances),
-             *(f"cnn_{s}" for s in p.cnn_strategies), "profiles_figure"]
-    if cfg.simulated:
-        names.append("ceiling")
-    return names + ["speed"]
-
-
 class StageProgress:
     """Listener of the study's stage cache: one bar over the stages, with an ETA."""
 
@@ -48,32 +38,32 @@ def _fmt(v, spec=".3f") -> str:
 
 
 def summary(results: dict) -> str:
-    """The final table of ``mdaug run``: each strategy's CNN on its main test set, the
-    separability ceiling, and the calibration's convergence."""
+    """The final table of ``mdaug run``: each strategy's CNN on the selection set and the
+    main test set, the choice, the separability ceiling, and the calibration."""
     classes = list(results["config"]["classes"])
+    sel = results["selection"]["set"]
     rows = []
 
     def row(name, test, m):
-        lo, hi = (m.get("ci") or {}).get("accuracy") or (None, None)
+        lo, hi = (m.get("ci") or {}).get("balanced_accuracy") or (None, None)
         ci = "-" if lo is None else f"[{lo:.3f}, {hi:.3f}]"
         recalls = [(m["per_class"].get(c) or {}).get("recall") for c in classes]
-        rows.append([name, test, str(m.get("n", "")), _fmt(m["accuracy"]), ci, _fmt(m.get("balanced_accuracy")),
+        rows.append([name, test, str(m.get("n", "")), _fmt(m.get("balanced_accuracy")), ci,
                      *(_fmt(r, ".2f") for r in recalls)])
 
+    best = (results.get("best_strategy") or {}).get("name")
     for name, s in results["strategies"].items():
         tests = s["tests"]
-        test = "new" if "new" in tests else next(iter(tests))
-        row(f"CNN {name}" + (f" (sigma_P {s['sigma_p']:g})" if s.get("sigma_p") is not None else ""), test,
-            tests[test])
+        test = "new" if "new" in tests else next(t for t in tests if t != sel)
+        setting = next((f" ({k} {s[k]:g})" for k in ("sigma_p", "width") if s.get(k) is not None), "")
+        row(f"CNN {name}{setting}{' *' if name == best else ''}", test, tests[test])
     for model, c in ((results.get("ceiling") or {}).get("models") or {}).items():
         tests = c["tests"]
-        if tests:
-            test = "new" if "new" in tests else next(iter(tests))
-            row(f"ceiling {model}", test, tests[test])
-    table = format_table(["strategy", "test", "n", "accuracy", "95% CI", "balanced",
-                          *(f"recall {c}" for c in classes)], rows,
-                         ["<", "<", ">", ">", "<", ">", *(">" for _ in classes)])
-    lines = [table, ""]
+        test = "new" if "new" in tests else next(iter(tests))
+        row(f"ceiling {model}", test, tests[test])
+    table = format_table(["strategy", "test", "n", "balanced acc.", "95% CI", *(f"recall {c}" for c in classes)],
+                         rows, ["<", "<", ">", ">", "<", *(">" for _ in classes)])
+    lines = [table, f"* the best strategy on the selection set '{sel}' ({results['selection']['what']})", ""]
     for cls, r in results["calibration"].items():
         d = r.get("diagnostics", {})
         state = "converged" if r["converged"] else f"NOT converged ({d.get('reason', 'see the report')})"
@@ -94,8 +84,15 @@ def run_study(args) -> int:
         cfg.scheduler = args.scheduler
     if args.quick:
         cfg = cfg.quick_version()
+    if args.ramps is not None:
+        if not cfg.simulated:
+            raise ValueError("--ramps sets the simulated campaign's ramps; with measured files use the config's "
+                             "protocol.acquisition_ramps (or the files' ramps_per_frame)")
+        import dataclasses
+
+        cfg.simulation = dataclasses.replace(cfg.simulation, ramps=args.ramps)
     cfg.validate()  # everything checked before the output folder exists
-    from ..reports.study import Study
+    from ..reports.study import Study, stage_names
 
     progress = StageProgress(stage_names(cfg))
     try:
@@ -128,6 +125,9 @@ def add_run(sub, parents, help):
     p.add_argument("--out", type=Path, default=Path("mdaug-study"),
                    help="output folder, created if needed (default: %(default)s)")
     p.add_argument("--quick", action="store_true", help="small sizes: a run of one to two minutes")
+    p.add_argument("--ramps", type=positive_int, default=None, metavar="K",
+                   help="ramps per frame of the simulated campaign (default: the config's, 32; 4 gives the "
+                        "4-ramp campaign)")
     p.add_argument("--seed", type=seed_int, default=None, help="the study's one seed (default: the config's, 0)")
     p.add_argument("--workers", type=positive_int, default=None, metavar="N",
                    help="local worker processes for independent jobs (default: the config's, 1)")

@@ -70,6 +70,7 @@ from math import comb, factorial
 import numpy as np
 import scipy.fft
 
+from ..radar.seeds import seed_sequence
 from ..radar import C0, RadarConfig
 from ..radar.chain import ChainConfig, angle_fft, angle_grid_deg
 from .model import TWO_PI, _wrap, vibration_terms
@@ -138,19 +139,6 @@ def _check_inputs(x, scene, chain, method, search_bins) -> np.ndarray:
     return arr
 
 
-def _seed_sequence(random_state) -> np.random.SeedSequence:
-    """int / None (fresh entropy) / SeedSequence as is; a Generator contributes one draw
-    (so it advances). Anything else is a ValueError naming random_state."""
-    if isinstance(random_state, np.random.Generator):
-        random_state = int(random_state.integers(2 ** 63 - 1))
-    if isinstance(random_state, np.random.SeedSequence):
-        return random_state
-    if random_state is None or isinstance(random_state, (int, np.integer)) and not isinstance(random_state, bool):
-        return np.random.SeedSequence(None if random_state is None else int(random_state))
-    raise ValueError(f"random_state must be an integer, None, a SeedSequence or a numpy Generator, "
-                     f"got {random_state!r}")
-
-
 def render_through_chain(x, scene: SceneConfig = SceneConfig(), radar: RadarConfig = RadarConfig(),
                          chain: ChainConfig = ChainConfig(), random_state=None, method: str = "reduced", *,
                          search_bins: int = SEARCH_BINS, interpolate: bool = True,
@@ -175,7 +163,7 @@ def render_through_chain(x, scene: SceneConfig = SceneConfig(), radar: RadarConf
     """
     x = _check_inputs(x, scene, chain, method, search_bins)
     n = x.shape[0]
-    root = _seed_sequence(random_state)
+    root = seed_sequence(random_state)
     ss_draw, ss_noise = root.spawn(2)
     d = draw_acquisitions(x, n, scene, radar, np.random.default_rng(ss_draw))  # row i -> acquisition i
     noise_seeds = ss_noise.spawn(n)

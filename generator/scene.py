@@ -54,9 +54,11 @@ import numpy as np
 from ..radar import C0, DataFileError, ProfileSet, RadarConfig, atomic_savez, read_arrays
 from ..radar.chain import ChainConfig, process_cube
 from .model import _wrap, if_signal, vibration_terms
+from .acquisition import PHASE_TREATMENTS, frame_phases, yaw_mix
 from .params import IDX, N_PARAMS, PHASES, ClassParams, load_reference
+from .specimens import SpecimenSpread
 
-SCENE_PHASES = ("uniform", "fixed")
+SCENE_PHASES = PHASE_TREATMENTS
 CHUNK_ACQ = 8  # acquisitions rendered together
 
 
@@ -142,30 +144,16 @@ class SceneConfig:
 
 
 # ---- specimens and acquisitions --------------------------------------------------
+def specimen_spread(scene: SceneConfig) -> SpecimenSpread:
+    """The scene's specimen model (:class:`.specimens.SpecimenSpread`)."""
+    return SpecimenSpread(speed=scene.speed_spread, frequency=scene.frequency_spread,
+                          amplitude=scene.amplitude_spread, gamma=scene.gamma_spread, skew=scene.skew_spread,
+                          width=scene.specimen_spread)
+
+
 def draw_specimens(reference: np.ndarray, n: int, scene: SceneConfig, rng: np.random.Generator) -> np.ndarray:
-    """Specimen vectors (n, 13 E) around a class reference (13 E,); rule in the module doc."""
-    m = scene.specimen_spread
-    e = reference.reshape(-1, N_PARAMS)
-    x = np.repeat(e[None], n, axis=0).copy()  # (n, E, 13)
-    speed = np.maximum(1.0 + m * scene.speed_spread * rng.standard_normal((n, 1)), 0.2)
-    for cols, spread, common in ((["w_a", "w_b"], scene.frequency_spread, speed),
-                                 (["A_a", "A_b", "A_p", "A_m"], scene.amplitude_spread, 1.0),
-                                 (["Gamma"], scene.gamma_spread, 1.0),
-                                 (["C_p", "C_m"], scene.skew_spread, 1.0)):
-        idx = [IDX[c] for c in cols]
-        factor = 1.0 + m * spread * rng.standard_normal((n, e.shape[0], len(idx)))
-        x[..., idx] = np.abs(x[..., idx] * factor * (common[..., None] if np.ndim(common) else common))
-    return x.reshape(n, -1)
-
-
-def yaw_mix(x: np.ndarray, yaw_rad: np.ndarray) -> np.ndarray:
-    """Roll/pitch amplitudes seen at yaw psi (N,): the energy-preserving mix of the module doc."""
-    e = x.reshape(x.shape[0], -1, N_PARAMS).copy()
-    a, b = e[..., IDX["A_a"]].copy(), e[..., IDX["A_b"]].copy()
-    c, s = np.cos(yaw_rad)[:, None], np.sin(yaw_rad)[:, None]
-    e[..., IDX["A_a"]] = np.hypot(a * c, b * s)
-    e[..., IDX["A_b"]] = np.hypot(a * s, b * c)
-    return e.reshape(x.shape)
+    """Specimen vectors (n, 13 E) around a class reference (13 E,): the scene's specimen model."""
+    return specimen_spread(scene).apply(np.repeat(np.asarray(reference, float)[None], n, axis=0), rng)
 
 
 @dataclass
@@ -194,11 +182,7 @@ def draw_acquisitions(specimens: np.ndarray, n: int, scene: SceneConfig, radar: 
     e = specimens.shape[1] // N_PARAMS
     yaw = rng.uniform(-scene.yaw_deg, scene.yaw_deg, n)
     x = yaw_mix(specimens[spec], np.radians(yaw))
-    if scene.phases == "uniform":
-        phases = rng.uniform(-np.pi, np.pi, (n, f, e, 4))
-    else:
-        ph = x.reshape(n, e, N_PARAMS)[..., list(PHASES)]
-        phases = np.repeat(ph[:, None], f, axis=1)
+    phases = frame_phases(x, f, scene.phases, rng)
     steps = rng.normal(0.0, scene.drift_step_m, (n, f))
     steps[:, 0] = 0.0
     r = rng.uniform(*scene.range_m, n)[:, None] + np.cumsum(steps, axis=1)
@@ -347,12 +331,33 @@ class Campaign:
         bin_m = RadarConfig.from_dict(self.settings["radar"]).bin_m if "radar" in self.settings else RadarConfig().bin_m
         return np.abs(self.range_m - self.range_true_m) <= 5 * bin_m
 
+    @property
+    def acquisition(self):
+        """The acquisition of the campaign's profiles (:func:`scene_acquisition`)."""
+        scene = SceneConfig(**{k: (tuple(v) if isinstance(v, list) else v)
+                               for k, v in self.settings.get("scene", {}).items()})
+        radar = RadarConfig.from_dict(self.settings["radar"]) if "radar" in self.settings else RadarConfig()
+        return scene_acquisition(scene, radar)
+
     def save(self, path) -> None:
-        """NPZ readable by :func:`mdaug.radar.load_profiles` (and :func:`load_campaign`)."""
+        """NPZ readable by :func:`mdaug.radar.load_profiles` (and :func:`load_campaign`), with
+        ``ramps_per_frame`` and ``acquisition`` (JSON) stating how the profiles were made."""
         arrays = {k: getattr(self, k) for k in self.ARRAYS}
         if self.cubes is not None:
             arrays["cubes"] = self.cubes
-        atomic_savez(path, settings=np.array(json.dumps(self.settings)), **arrays)
+        acq = self.acquisition
+        atomic_savez(path, settings=np.array(json.dumps(self.settings)), ramps_per_frame=np.array(acq.ramps),
+                     acquisition=np.array(json.dumps(acq.to_dict())), **arrays)
+
+
+def scene_acquisition(scene: SceneConfig, radar: RadarConfig = RadarConfig()):
+    """The :class:`~.acquisition.Acquisition` a scene's profiles are measured under: its
+    ramps, phase treatment, yaw and body return, through the published chain (MTI over
+    radar.mti_depth frames, the measured preset's jitter, noise and drift)."""
+    from .acquisition import Acquisition
+
+    return Acquisition.measured(scene.n_ramps, phases=scene.phases, yaw_deg=scene.yaw_deg, carrier=scene.body_ratio,
+                                mti_depth=radar.mti_depth)
 
 
 PER_ROW = ("specimen", "range_true_m", "azimuth_deg", "yaw_deg", "range_m", "direction_deg", "peak_db", "n_missing",

@@ -6,10 +6,12 @@ Imports :mod:`mdaug.generator` and :mod:`mdaug.radar` only.
 """
 from .calibrate import calibrate
 from .likelihood import LogPosterior, prepare_measured
-from .posterior_augment import PosteriorAugmenter
-from .priors import Layout, Priors
+from .posterior_augment import FitSigmaPAugmenter, PosteriorAugmenter, PosteriorSource
+from .layout import Layout
+from .priors import Priors
 from .result import CalibrationResult
 from .settings import CalibrationSettings
+from .synthetic import SyntheticLikelihood
 
-__all__ = ["CalibrationResult", "CalibrationSettings", "Layout", "LogPosterior", "PosteriorAugmenter", "Priors",
+__all__ = ["CalibrationResult", "CalibrationSettings", "Layout", "LogPosterior", "PosteriorAugmenter", "PosteriorSource", "FitSigmaPAugmenter", "SyntheticLikelihood", "Priors",
            "calibrate", "prepare_measured"]

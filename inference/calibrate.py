@@ -1,38 +1,43 @@
 """calibrate(): measured profiles of one class -> posterior over its parameter vector.
 
-Steps: check and normalise the measurements; priors from the class reference; a
-multi-start nlopt fit (:mod:`.fit`); emcee from the best point until 50 tau or the
-budget (:mod:`.sampler`); draws, per-bin log-likelihood and diagnostics packed in
-an arviz InferenceData (:mod:`.result`). ``engines="auto"`` compares engine counts
-(:mod:`.compare`). One seed drives everything (a SeedSequence spawns the fit's,
-the start ball's and emcee's streams).
+Steps: check and normalise the measurements; priors from the class reference; the
+likelihood of the measurements under their acquisition (phases marginalised,
+:mod:`.synthetic`, or fitted, :mod:`.likelihood`, see
+:func:`use_marginal`); a multi-start nlopt fit (:mod:`.fit`); a sampler plugin
+(:mod:`.samplers`: emcee by default, to 50 tau or the time budget); draws,
+log-likelihood and diagnostics packed in an arviz InferenceData (:mod:`.result`).
+Engine-count comparison sits above this module (:mod:`.compare`). One seed drives
+everything (a SeedSequence spawns the fit's and the sampler's streams, and the
+marginal likelihood's common random numbers).
+
+Resume: with ``backend_path`` the sampler checkpoints there and the fit is saved
+beside it (``<backend>.fit.json``); a rerun of the same problem reuses the fit and
+continues the chain, and says so (``diagnostics["resumed_at"]``, ``fit_reused``).
 """
 from __future__ import annotations
 
 import json
 import warnings
+from pathlib import Path
 
 import numpy as np
 
 from ..generator import IDX, N_PARAMS, ClassParams, load_reference
-from ..radar import RadarConfig
-from .fit import AGREE_DISTANCE, RIVAL_MISFIT, global_fit
+from ..generator.acquisition import Acquisition
+from ..radar import RadarConfig, atomic_write
+from ..radar.seeds import seed_sequence
+from .ensemble import fingerprint
+from .fit import FitResult, global_fit
+from .layout import Layout
 from .likelihood import LogPosterior, prepare_measured
-from .priors import PHASE_NAMES, SHARED, Layout, Priors
+from .priors import PHASE_NAMES, SHARED, Priors
 from .result import FORMAT, IDENTIFIED_RATIO, CalibrationResult, import_arviz
-from .sampler import curvature_scales, fingerprint, initial_ball, run_sampler
+from .samplers import SamplerRun, get_sampler
 from .settings import CalibrationSettings
+from .synthetic import SyntheticLikelihood
 
 MAX_DRAWS = 4000  # posterior draws kept (thinned further when the chain holds more)
 TRACE_STEPS = 400  # steps kept in the trace group
-
-
-def seed_sequence(random_state) -> np.random.SeedSequence:
-    if isinstance(random_state, np.random.SeedSequence):
-        return random_state
-    if isinstance(random_state, np.random.Generator):
-        return np.random.SeedSequence(int(random_state.integers(2**63 - 1)))
-    return np.random.SeedSequence(random_state)
 
 
 def start_vector(ref: ClassParams, n_engines: int) -> np.ndarray:
@@ -47,169 +52,197 @@ def start_vector(ref: ClassParams, n_engines: int) -> np.ndarray:
     return np.concatenate(rows)
 
 
-def calibrate(profiles, reference, *, engines=None, settings: CalibrationSettings = CalibrationSettings(),
-              random_state=None, backend_path=None, priors: Priors | None = None,
-              radar: RadarConfig = RadarConfig(), candidates=(1, 2, 4)) -> CalibrationResult:
+def use_marginal(acquisition: Acquisition, settings: CalibrationSettings) -> bool:
+    """Whether the phases are marginalised: ``settings.likelihood`` when forced, else
+    when the acquisition draws them at random or averages several ramps or an MTI
+    residual (the published single chirp at fixed phases fits them)."""
+    if settings.likelihood != "auto":
+        return settings.likelihood == "marginal"
+    return acquisition.phases == "uniform" or acquisition.ramps > 1 or acquisition.mti_depth > 0
+
+
+def make_likelihood(data: np.ndarray, ref: ClassParams, n_engines: int, acquisition: Acquisition,
+                    settings: CalibrationSettings, ss: np.random.SeedSequence, priors: Priors | None = None,
+                    radar: RadarConfig = RadarConfig()):
+    """The likelihood object (with its :class:`Layout`) for normalised data (M, L)."""
+    priors = priors or Priors.from_reference(ref, radar, alignment=settings.alignment)
+    if use_marginal(acquisition, settings):
+        if settings.normalisation != "peak":
+            raise ValueError(f"the marginal likelihood compares peak-normalised profiles; normalisation "
+                             f"{settings.normalisation!r} is only available with fitted phases (likelihood='fitted')")
+        layout = Layout(n_engines, data.shape[0], priors, marginal=True)
+        return SyntheticLikelihood(data, layout, acquisition, radar, n_acquisitions=settings.n_acquisitions,
+                                   ramps_drawn=settings.ramps_drawn, stride=settings.stride, seed=ss,
+                                   dtype=settings.dtype)
+    layout = Layout(n_engines, data.shape[0], priors, settings.range_offset,
+                    sigma_bounds=(settings.sigma_min, settings.sigma_max))
+    return LogPosterior(data, layout, radar, normalisation=settings.normalisation, dtype=settings.dtype,
+                        sigma_bounds=(settings.sigma_min, settings.sigma_max), alignment=settings.alignment)
+
+
+def calibrate(profiles, reference, *, engines: int | None = None, acquisition: Acquisition | None = None,
+              settings: CalibrationSettings = CalibrationSettings(), random_state=None, backend_path=None,
+              priors: Priors | None = None, radar: RadarConfig = RadarConfig()) -> CalibrationResult:
     """Calibrate one class from its measured profiles.
 
-    profiles: (n, L) or (L,) linear-magnitude measured profiles of one class (1-5
-    measurements; L = radar.slice_length). reference: ClassParams or class name (prior
-    centres and bounds, default engine count). engines: None (the reference's
-    count), an int, or "auto" (choose among ``candidates`` by LOO, see
-    :func:`.compare.select_engines`). backend_path: HDF5 file for emcee's chain
-    (an interrupted run with the same arguments resumes from it). priors: override
-    the reference-derived :class:`Priors`.
+    profiles: (n, L) or (L,) linear-magnitude measured profiles of one class (a
+    handful, typically 5; L = radar.slice_length). reference: ClassParams or class
+    name (prior centres and bounds, default engine count). engines: None (the
+    reference's count) or an int (to choose it by model comparison use
+    :func:`.compare.select_engines`). acquisition: how the profiles were measured
+    (:class:`~mdaug.generator.acquisition.Acquisition`; None = the published single
+    chirp). backend_path: checkpoint of the sampler (an interrupted run with the same
+    arguments resumes from it). priors: override the reference-derived
+    :class:`Priors`.
     """
     ref = load_reference(reference) if isinstance(reference, str) else reference
     settings = settings if settings is not None else CalibrationSettings()
+    acquisition = acquisition if acquisition is not None else Acquisition()
     if engines == "auto":
-        from .compare import select_engines
-
-        return select_engines(profiles, ref, candidates=candidates, settings=settings, random_state=random_state,
-                              backend_path=backend_path, priors=priors, radar=radar)
+        raise ValueError("engines='auto' is model comparison: use mdaug.inference.compare.select_engines")
     n_eng = ref.n_engines if engines is None else int(engines)
     if n_eng < 1:
-        raise ValueError(f"engines must be >= 1, None or 'auto', got {engines!r}")
+        raise ValueError(f"engines must be >= 1 or None, got {engines!r}")
     data, shifts = prepare_measured(profiles, radar, settings.normalisation,
                                     what=f"measured profiles of class {ref.name}")
-    priors = priors or Priors.from_reference(ref, radar, alignment=settings.alignment)
-    layout = Layout(n_eng, data.shape[0], priors, settings.range_offset)
-    post = LogPosterior(data, layout, radar, normalisation=settings.normalisation, dtype=settings.dtype,
-                        sigma_bounds=(settings.sigma_min, settings.sigma_max), alignment=settings.alignment)
-    return run_calibration(post, ref, settings, seed_sequence(random_state), start_vector(ref, n_eng),
-                           backend_path=backend_path, shifts=shifts)
+    ss = seed_sequence(random_state)
+    lik_ss, run_ss = ss.spawn(2)
+    post = make_likelihood(data, ref, n_eng, acquisition, settings, lik_ss, priors, radar)
+    return run_calibration(post, ref, settings, run_ss, start_vector(ref, n_eng), backend_path=backend_path,
+                           shifts=shifts, acquisition=acquisition)
 
 
-def run_calibration(post: LogPosterior, ref: ClassParams, settings: CalibrationSettings,
-                    ss: np.random.SeedSequence, start_x, *, backend_path=None, shifts=None) -> CalibrationResult:
-    """Fit + MCMC + packing for a prepared :class:`LogPosterior` (also used by the
+def _fit_path(backend_path) -> Path | None:
+    return None if backend_path is None else Path(f"{backend_path}.fit.json")
+
+
+def saved_fit(backend_path, fp: str) -> FitResult | None:
+    """The fit saved beside a checkpoint of the same problem (None when there is none)."""
+    path = _fit_path(backend_path)
+    if path is None or not path.is_file():
+        return None
+    try:
+        stored = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    if stored.get("fingerprint") != fp:
+        return None
+    return FitResult.from_dict(stored["fit"])
+
+
+def run_calibration(post, ref: ClassParams, settings: CalibrationSettings, ss: np.random.SeedSequence, start_x,
+                    *, backend_path=None, shifts=None, acquisition: Acquisition | None = None) -> CalibrationResult:
+    """Fit + sampler + packing for a prepared likelihood (also used by the
     simulation-based calibration, which builds its own data). start_x: (13E,) vector
     the first fit start begins at."""
     from threadpoolctl import threadpool_limits
 
     layout, radar = post.layout, post.radar
-    fit_ss, ball_ss, mc_ss = ss.spawn(3)
+    fit_ss, mc_ss = ss.spawn(2)
+    acquisition = acquisition if acquisition is not None else Acquisition()
     with threadpool_limits(settings.threads):
-        start = layout.canonical(layout.z_from_physics(start_x))[0]
-        fit = global_fit(post, settings, fit_ss, start=start)
-        resume_key = {k: v for k, v in settings.to_dict().items() if k not in ("max_steps", "progress", "threads")}
-        if settings.sampler == "emcee":  # keep the fingerprint of existing checkpoints unchanged
-            resume_key = {k: v for k, v in resume_key.items() if k != "sampler" and not k.startswith("smc_")
-                          and k != "n_particles"}
+        resume_key = {k: v for k, v in settings.to_dict().items()
+                      if k not in ("max_steps", "time_budget", "progress", "threads")}
         fp = fingerprint(post.data, text=json.dumps([ref.name, layout.E, layout.priors.to_dict(), resume_key,
-                                                     str(ss.entropy), list(ss.spawn_key), radar.to_dict()],
-                                                    default=str))
-        smc = None
-        if settings.sampler == "smc":
-            from .tempering import calibrate_smc
-
-            chain, smc = calibrate_smc(post, settings, mc_ss, backend_path=backend_path, fp=fp, fit=fit)
-            n_modes = 0
-        else:
-            n_walkers = max(settings.n_walkers or 3 * layout.dim, 2 * layout.dim + 2, 32)  # DE needs > 2 dim
-            n_walkers += n_walkers % 2
-            p0, n_modes = start_walkers(post, fit, settings, n_walkers, np.random.default_rng(ball_ss))
-            chain = run_sampler(post, p0, settings, seed=int(mc_ss.generate_state(1)[0]),
-                                backend_path=backend_path, fp=fp, phase_cols=layout.phase_cols,
-                                relabel=layout.random_relabel)
-        theta = chain.draws()
-        lp = chain.draws_log_prob()
+                                                     str(ss.entropy), list(ss.spawn_key), radar.to_dict(),
+                                                     acquisition.to_dict()], default=str))
+        fit = saved_fit(backend_path, fp)
+        fit_reused = fit is not None
+        if fit is None:
+            start = layout.z_from_physics(start_x)
+            if layout.marginal:
+                start = layout.theta_from_z(start[None], np.full((1, layout.M), np.mean(layout.tail_bounds)))[0]
+            fit = global_fit(post, settings, fit_ss, start=post.canonical_fit(start[None])[0])
+            path = _fit_path(backend_path)
+            if path is not None:
+                text = json.dumps({"fingerprint": fp, "fit": fit.to_dict()})
+                atomic_write(path, lambda fh: fh.write(text.encode()))
+        run = get_sampler(settings.sampler).run(post, fit, settings, mc_ss, backend_path=backend_path,
+                                                fingerprint=fp)
+        theta = run.draws()
+        lp = run.draws_log_prob()
         if len(theta) > MAX_DRAWS:
             keep = np.linspace(0, len(theta) - 1, MAX_DRAWS).round().astype(int)
             theta, lp = theta[keep], lp[keep]
         loglik = post.pointwise(theta)
     shifts = np.zeros(layout.M, int) if shifts is None else shifts
-    return build_result(ref, layout, post, fit, chain, theta, lp, loglik, settings, radar, shifts, n_modes, smc)
+    return build_result(ref, layout, post, fit, run, theta, lp, loglik, settings, radar, shifts,
+                        acquisition=acquisition, fit_reused=fit_reused)
 
 
-def start_walkers(post: LogPosterior, fit, settings, n_walkers: int, rng) -> tuple[np.ndarray, int]:
-    """Initial walkers (n_walkers, dim): around the best fit, and with ``init_modes``
-    also around every distinct rival mode the fit found (within RIVAL_MISFIT nats),
-    split evenly, so the ensemble starts on every competitive mode it knows of.
-    Returns (walkers, number of modes started on)."""
-    layout = post.layout
-    lo, hi = layout.z_bounds()
-    width = (hi - lo)[: layout.n_shared]
-    order = np.argsort(fit.starts_misfit)
-    centres = [fit.best_z]
-    if settings.init_modes:
-        for i in order:
-            z = fit.starts_z[i]
-            if fit.starts_misfit[i] - fit.misfit > RIVAL_MISFIT:
-                break
-            if all(np.max(np.abs(z[: layout.n_shared] - c[: layout.n_shared]) / width) > AGREE_DISTANCE
-                   for c in centres):
-                centres.append(z)
-    counts = np.full(len(centres), n_walkers // len(centres))
-    counts[0] += n_walkers - counts.sum()
-    groups = []
-    for z, n in zip(centres, counts):
-        sigma = np.sqrt(post.ssr(z[None])[0] / post.n_bins)
-        ln_sig = np.log(np.clip(sigma, settings.sigma_min * 1.01, settings.sigma_max * 0.99))
-        theta = layout.theta_from_z(z[None], ln_sig[None])[0]
-        scales = settings.init_ball * curvature_scales(layout, theta, post)
-        groups.append(initial_ball(layout, theta, post, int(n), scales, rng))
-    return np.concatenate(groups), len(centres)
+def _diagnostics(layout: Layout, run: SamplerRun, fit, settings, fit_reused: bool) -> dict:
+    names = layout.theta_names()
+    tau, ess = run.tau, run.ess
+    return {"sampler": run.sampler, **run.extra,
+            "converged": bool(run.converged), "reason": run.reason,
+            "tau": {n: float(t) for n, t in zip(names, tau)}, "ess": {n: float(v) for n, v in zip(names, ess)},
+            "tau_max": float(tau.max()), "ess_min": float(ess.min()),
+            "chain_steps": int(run.n_steps), "steps_over_tau": float(run.n_steps / tau.max()),
+            "acceptance_mean": float(run.acceptance.mean()), "acceptance_min": float(run.acceptance.min()),
+            "n_walkers": int(run.chain.shape[1]), "burn": int(run.burn), "thin": int(run.thin),
+            "seconds": float(run.seconds), "fit_seconds": float(fit.seconds), "resumed_at": int(run.resumed_at),
+            "fit_reused": bool(fit_reused), "store_every": int(run.store_every),
+            "n_fit_starts": int(settings.n_starts), "n_fit_starts_agreeing": int(fit.n_agree),
+            "multimodal": bool(fit.multimodal), "min_tau_multiple": float(settings.min_tau_multiple)}
 
 
-def _diagnostics(layout: Layout, chain, fit, settings, n_modes: int, smc=None) -> dict:
-    names = layout.z_names() + [f"ln_sigma@{m}" for m in range(layout.M)]
-    tau, ess = chain.tau, chain.ess
-    extra = {"sampler": "emcee"}
-    if smc is not None:
-        from .tempering import smc_diagnostics
-
-        extra = smc_diagnostics(smc)
-    return {**extra,
-        "converged": bool(chain.converged), "reason": chain.reason,
-        "tau": {n: float(t) for n, t in zip(names, tau)}, "ess": {n: float(v) for n, v in zip(names, ess)},
-        "tau_max": float(tau.max()), "ess_min": float(ess.min()),
-        "chain_steps": int(chain.n_steps), "steps_over_tau": float(chain.n_steps / tau.max()),
-        "acceptance_mean": float(chain.acceptance.mean()), "acceptance_min": float(chain.acceptance.min()),
-        "n_walkers": int(chain.chain.shape[1]), "burn": int(chain.burn), "thin": int(chain.thin),
-        "seconds": float(chain.seconds), "resumed_at": int(chain.resumed_at),
-        "store_every": int(chain.store_every),
-        "n_fit_starts": int(settings.n_starts), "n_fit_starts_agreeing": int(fit.n_agree),
-        "multimodal": bool(fit.multimodal), "min_tau_multiple": float(settings.min_tau_multiple),
-        "n_start_modes": int(n_modes),
-    }
-
-
-def build_result(ref, layout: Layout, post: LogPosterior, fit, chain, theta, lp, loglik, settings, radar,
-                 shifts, n_modes: int = 1, smc=None) -> CalibrationResult:
-    """Pack draws, diagnostics and metadata into an InferenceData (see :mod:`.result`)."""
-    import xarray as xr
-
-    az = import_arviz()
-    z, ln_sigma = layout.split_theta(theta)
-    x, off = layout.physics(z)  # (n, M, 13E), (n, M)
+def _posterior_variables(layout: Layout, theta: np.ndarray):
+    """(variables, dims) of the posterior group for draws theta (n, dim)."""
+    z, tail = layout.split_theta(theta)
+    x, extra = layout.physics(z)  # (n, M, 13E), (n, M)
     n, m_meas = x.shape[:2]
     xe = x.reshape(n, m_meas, layout.E, N_PARAMS)
     post_vars = {name: xe[None, :, 0, :, IDX[name]] for name in ("Gamma",) + SHARED}
-    post_vars.update({name: xe[None, :, :, :, IDX[name]] for name in PHASE_NAMES})
-    post_vars["offset"] = off[None]
-    post_vars["sigma"] = np.exp(ln_sigma)[None]
     dims = {name: ["engine"] for name in ("Gamma",) + SHARED}
-    dims.update({name: ["measurement", "engine"] for name in PHASE_NAMES})
-    dims.update({"offset": ["measurement"], "sigma": ["measurement"], "y": ["measurement", "bin"]})
+    if layout.marginal:
+        post_vars["carrier"] = layout.carriers(z)[None]
+        post_vars["offset"] = extra[None]
+        post_vars["noise_db"] = tail[None]
+        dims.update({"carrier": ["measurement"], "offset": ["measurement"], "noise_db": ["measurement"],
+                     "y": ["measurement"]})
+    else:
+        post_vars.update({name: xe[None, :, :, :, IDX[name]] for name in PHASE_NAMES})
+        post_vars["offset"] = extra[None]
+        post_vars["sigma"] = np.exp(tail)[None]
+        dims.update({name: ["measurement", "engine"] for name in PHASE_NAMES})
+        dims.update({"offset": ["measurement"], "sigma": ["measurement"], "y": ["measurement", "bin"]})
+    return post_vars, dims
+
+
+def build_result(ref, layout: Layout, post, fit, run: SamplerRun, theta, lp, loglik, settings, radar,
+                 shifts, *, acquisition: Acquisition, fit_reused: bool = False) -> CalibrationResult:
+    """Pack draws, diagnostics and metadata into an InferenceData (see :mod:`.result`).
+    loglik: (n, M, L) per bin (fitted phases) or (n, M) per measurement (marginal)."""
+    import xarray as xr
+
+    az = import_arviz()
+    post_vars, dims = _posterior_variables(layout, theta)
     idata = az.from_dict(posterior=post_vars, sample_stats={"lp": lp[None]}, log_likelihood={"y": loglik[None]},
                          observed_data={"y": post.data}, dims=dims)
-    step = max(1, chain.chain.shape[0] // TRACE_STEPS)
-    names = layout.z_names() + [f"ln_sigma@{m}" for m in range(layout.M)]
-    trace = xr.Dataset({"theta": (("step", "walker", "coord"), chain.chain[::step]),
-                        "lp": (("step", "walker"), chain.log_prob[::step])},
-                       coords={"step": (np.arange(0, chain.chain.shape[0], step) + 1) * chain.store_every,
-                               "coord": names})
+    step = max(1, run.chain.shape[0] // TRACE_STEPS)
+    trace = xr.Dataset({"theta": (("step", "walker", "coord"), run.chain[::step]),
+                        "lp": (("step", "walker"), run.log_prob[::step])},
+                       coords={"step": (np.arange(0, run.chain.shape[0], step) + 1) * run.store_every,
+                               "coord": layout.theta_names()})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # arviz warns that "chain_trace" is not a standard group
         idata.add_groups({"chain_trace": trace})
-    best_x, _ = layout.physics(fit.best_z[None])
+    best_theta = post.theta_from_fit(fit.best_z[None])
+    best_x, _ = layout.physics(layout.split_theta(best_theta)[0])
+    if layout.marginal:
+        noise_model = ("Gaussian synthetic likelihood: the acquisition's phases, MTI residual, carrier-return "
+                       "phase, sub-bin range and yaw marginalised by simulation; carrier return and noise floor "
+                       "per measurement")
+        lik = post.settings()
+    else:
+        noise_model = "Gaussian iid per bin on the normalised profile, sigma per measurement (log-uniform)"
+        lik = {"likelihood": "fitted phases"}
     meta = {"format": FORMAT, "class_name": ref.name, "n_engines": layout.E, "n_measurements": layout.M,
             "settings": settings.to_dict(), "priors": layout.priors.to_dict(), "radar": radar.to_dict(),
-            "fit": fit.to_dict(), "best_fit": best_x[0, 0].tolist(), "z_names": layout.z_names(),
+            "acquisition": acquisition.to_dict(), "likelihood": lik, "marginal": bool(layout.marginal),
+            "fit": fit.to_dict(), "best_fit": best_x[0, 0].tolist(), "theta_names": layout.theta_names(),
             "recentred_shifts": np.asarray(shifts).tolist(),
-            "diagnostics": _diagnostics(layout, chain, fit, settings, n_modes, smc),
-            "noise_model": "Gaussian iid per bin on the normalised profile, sigma per measurement (log-uniform)"}
+            "diagnostics": _diagnostics(layout, run, fit, settings, fit_reused), "noise_model": noise_model}
     idata.posterior.attrs["mdaug"] = json.dumps(meta)
     res = CalibrationResult(idata)
     table = res.summary()

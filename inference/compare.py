@@ -24,7 +24,7 @@ DSE_RULE = 2.0
 
 
 def select_engines(profiles, ref, *, candidates=(1, 2, 4), settings=None, random_state=None, backend_path=None,
-                   priors=None, radar=None) -> CalibrationResult:
+                   priors=None, radar=None, acquisition=None) -> CalibrationResult:
     """Calibrate every candidate engine count, compare by LOO, return the chosen
     result with the comparison table in ``result.comparison`` (list of dicts)."""
     from .calibrate import calibrate, seed_sequence
@@ -38,7 +38,7 @@ def select_engines(profiles, ref, *, candidates=(1, 2, 4), settings=None, random
         bp = None if backend_path is None else Path(f"{backend_path}.e{e}")
         kw = {} if radar is None else {"radar": radar}
         results[e] = calibrate(profiles, ref, engines=e, settings=settings, random_state=ss, backend_path=bp,
-                               priors=priors, **kw)
+                               priors=priors, acquisition=acquisition, **kw)
     table = compare_results(results)
     ok = [row for row in table if row["elpd_diff"] <= DSE_RULE * max(row["dse"], 1e-12) or row["rank"] == 0]
     chosen = min(row["engines"] for row in ok)

@@ -1,9 +1,15 @@
 """Global fit with nlopt: several global starts, each polished locally
 (the first start also polishes the class reference itself, after a vectorised
-random scan of every measurement's phases).
+random scan of every measurement's phases when they are fitted).
 
-The objective is :meth:`LogPosterior.misfit` (negative profile log-likelihood,
-sigma profiled out) on the unit cube mapped onto the prior box of the fit space z.
+Both likelihoods expose one fit space (``fit_bounds``, ``fit_objective``,
+``canonical_fit``, ``theta_from_fit``): for :class:`.likelihood.LogPosterior` it is
+z with the noise level profiled out (misfit = negative profile log-likelihood),
+for :class:`.synthetic.SyntheticLikelihood` the whole theta (negative
+log-likelihood); the global stage of the latter runs on its ``coarse()`` copy
+(fewer simulated acquisitions: a global search needs the landscape, not its last
+decimal) and the local polish on the likelihood itself. The objective is
+minimised on the unit cube mapped onto the fit space's prior box.
 Each start is one run of a global algorithm (``GN_CRS2_LM`` by default) with its
 own nlopt seed and budget, then a local polish (``LN_BOBYQA``). The first start
 begins at the class reference. Results are reduced by the model's symmetries
@@ -27,9 +33,10 @@ AGREE_DISTANCE = 0.05  # max |difference| of shared parameters, in units of thei
 class FitResult:
     """Outcome of the multi-start fit.
 
-    best_z: (dim_z,) canonical best point; misfit: its negative profile
-    log-likelihood (nats, up to a constant); sigma: (M,) maximum-likelihood noise
-    level per measurement; starts_z (S, dim_z), starts_misfit (S,), evals (S,);
+    best_z: canonical best point of the fit space (z, or theta for the marginal
+    likelihood); misfit: its objective (nats, up to a constant); sigma: (M,) the
+    noise of each measurement there (fitted phases: the maximum-likelihood level;
+    marginal: the noise floor in dB); starts_z (S, d), starts_misfit (S,), evals (S,);
     n_agree: starts whose misfit is within ``AGREE_MISFIT`` of the best and whose
     shared parameters are within ``AGREE_DISTANCE`` prior widths of it;
     multimodal: some start ends within ``RIVAL_MISFIT`` nats of the best at a distant
@@ -61,14 +68,14 @@ class FitResult:
                    algorithm=d["algorithm"], seconds=float(d["seconds"]), notes=list(d.get("notes", [])), **arr)
 
 
-def _run_one(nlopt, algorithm: str, post: LogPosterior, lo, hi, u0, budget: int, seed: int):
+def _run_one(nlopt, algorithm: str, post, lo, hi, u0, budget: int, seed: int):
     """One nlopt run on the unit cube; returns (best u, best value, evaluations)."""
     d = len(lo)
     best = {"f": np.inf, "u": np.array(u0, float), "n": 0}
 
     def objective(u, grad):
         best["n"] += 1
-        f = float(post.misfit((lo + (hi - lo) * np.asarray(u))[None])[0])
+        f = float(post.fit_objective((lo + (hi - lo) * np.asarray(u))[None])[0])
         if not np.isfinite(f):
             f = 1e300
         if f < best["f"]:
@@ -98,6 +105,26 @@ def _run_one(nlopt, algorithm: str, post: LogPosterior, lo, hi, u0, budget: int,
     return best["u"], best["f"], best["n"]
 
 
+def polish_subset(post, v: np.ndarray, cols: np.ndarray, budget: int, seed: int) -> np.ndarray:
+    """v (d,) with only its coordinates ``cols`` polished by BOBYQA (the rest held):
+    the measurements' nuisances first, before the physics moves."""
+    import nlopt
+
+    lo, hi = post.fit_bounds()
+    v = np.array(v, float)
+    sub_lo, sub_hi = lo[cols], hi[cols]
+
+    class _Sub:
+        def fit_objective(self, u):
+            full = np.repeat(v[None], len(u), axis=0)
+            full[:, cols] = u
+            return post.fit_objective(full)
+
+    u, _, _ = _run_one(nlopt, "LN_BOBYQA", _Sub(), sub_lo, sub_hi, (v[cols] - sub_lo) / (sub_hi - sub_lo), budget, seed)
+    v[cols] = sub_lo + (sub_hi - sub_lo) * u
+    return v
+
+
 def scan_phases(post: LogPosterior, z: np.ndarray, rng: np.random.Generator, n: int = 2048) -> np.ndarray:
     """z with every measurement's phases (and offset) replaced by the best of ``n``
     uniform random draws, the shared parameters held: a measurement's rotor phases
@@ -115,27 +142,36 @@ def scan_phases(post: LogPosterior, z: np.ndarray, rng: np.random.Generator, n: 
     return z
 
 
-def global_fit(post: LogPosterior, settings, seed_seq: np.random.SeedSequence, start=None) -> FitResult:
+def global_fit(post, settings, seed_seq: np.random.SeedSequence, start=None) -> FitResult:
     """Multi-start global fit + local polish; see the module docstring.
 
-    start: optional fit-space point (dim_z,) used as the first start's initial point
+    start: optional fit-space point used as the first start's initial point
     (default: the class reference, or a prior draw when shapes differ).
     """
     import nlopt
 
     t0 = time.perf_counter()
     layout = post.layout
-    lo, hi = layout.z_bounds()
+    lo, hi = post.fit_bounds()
     width = hi - lo
+    coarse = post.coarse() if hasattr(post, "coarse") else post
     rng = np.random.default_rng(seed_seq)
     zs, fs, ns = [], [], []
     for s in range(settings.n_starts):
         if s == 0 and start is not None:
-            u0 = (np.clip(scan_phases(post, np.clip(start, lo, hi), rng), lo, hi) - lo) / width
+            v0 = np.clip(start, lo, hi)
+            if layout.phase_cols.size:
+                v0 = scan_phases(post, v0, rng)
+            elif hasattr(post, "nuisance_cols"):  # marginal: each measurement's carrier and noise first
+                v0 = polish_subset(post, v0, post.nuisance_cols(), max(50, settings.polish_budget // 2),
+                                   int(rng.integers(2**31 - 1)))
+            u0 = (np.clip(v0, lo, hi) - lo) / width
         else:
             u0 = rng.uniform(size=len(lo))
         seed = int(rng.integers(2**31 - 1))
-        u, f, n = _run_one(nlopt, settings.fit_algorithm, post, lo, hi, u0, settings.fit_budget, seed)
+        u, f, n = _run_one(nlopt, settings.fit_algorithm, coarse, lo, hi, u0, settings.fit_budget, seed)
+        if coarse is not post:
+            f = float(post.fit_objective((lo + width * u)[None])[0])
         if settings.local_algorithm != "none" and settings.polish_budget > 0:
             # polish the global result; the first start also polishes its initial point
             # (the reference) directly, which a population method may have left behind
@@ -145,7 +181,7 @@ def global_fit(post: LogPosterior, settings, seed_seq: np.random.SeedSequence, s
                 n += n2
                 if f2 < f:
                     u, f = u2, f2
-        zs.append(layout.canonical(lo + width * u)[0])
+        zs.append(post.canonical_fit((lo + width * u)[None])[0])
         fs.append(f)
         ns.append(n)
     zs, fs = np.array(zs), np.array(fs)
@@ -156,7 +192,7 @@ def global_fit(post: LogPosterior, settings, seed_seq: np.random.SeedSequence, s
     n_agree = int(np.sum(close & (dist <= AGREE_DISTANCE)))
     rivals = (fs - fs[best] <= RIVAL_MISFIT) & (dist > AGREE_DISTANCE)
     multimodal = bool(np.any(rivals))
-    sigma = np.sqrt(post.ssr(zs[best][None])[0] / post.n_bins)
+    sigma = post.fit_noise(zs[best][None])[0]
     notes = []
     if multimodal:
         notes.append(f"multimodal: {int(np.sum(rivals))} start(s) fit within {RIVAL_MISFIT} nats of the best "

@@ -16,7 +16,7 @@ import numpy as np
 from ..generator import profiles as model_profiles
 from ..generator import spectra as model_spectra
 from ..radar import RadarConfig, centred_slices, normalise
-from .priors import Layout
+from .layout import Layout
 
 LOG_2PI = float(np.log(2 * np.pi))
 ALIGNMENTS = ("tone", "peak")
@@ -111,6 +111,28 @@ class LogPosterior:
         """Negative profile log-likelihood (sigma_m at its maximum), up to a constant: (W,)."""
         ssr = np.maximum(self.ssr(z), 1e-300)
         return 0.5 * self.n_bins * np.sum(np.log(ssr / self.n_bins), axis=1)
+
+    # ---- the fit space (z, noise level profiled out; see .fit) ----------------------
+    def fit_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.layout.z_bounds()
+
+    def fit_objective(self, v: np.ndarray) -> np.ndarray:
+        return self.misfit(v)
+
+    def canonical_fit(self, v: np.ndarray) -> np.ndarray:
+        return self.layout.canonical(v)
+
+    def fit_noise(self, v: np.ndarray) -> np.ndarray:
+        """Maximum-likelihood noise level sigma (W, M) at fit-space points v (W, dim_z)."""
+        return np.sqrt(self.ssr(np.atleast_2d(v)) / self.n_bins)
+
+    def theta_from_fit(self, v: np.ndarray) -> np.ndarray:
+        """theta (W, dim) at fit-space points v: z with each measurement's profiled noise
+        level (clipped inside its prior)."""
+        v = np.atleast_2d(v)
+        lo, hi = self.sigma_bounds
+        sigma = np.clip(self.fit_noise(v), lo * 1.01, hi * 0.99)
+        return self.layout.theta_from_z(v, np.log(sigma))
 
     def pointwise(self, theta: np.ndarray) -> np.ndarray:
         """Per-bin log-likelihood (W, M, L) of theta (W, dim)."""

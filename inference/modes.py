@@ -184,9 +184,8 @@ class ModeFinder:
         lay = post.layout
         self.post, self.n_polish, self.polish_budget = post, int(n_polish), int(polish_budget)
         self.discover_at = tuple(discover_at)
-        lo, hi = lay.z_bounds()
-        ls = np.log(post.sigma_bounds)
-        self.width = np.concatenate([hi - lo, np.full(lay.M, ls[1] - ls[0])])
+        lo, hi = lay.theta_bounds()
+        self.width = hi - lo
         self.max_sd = max_sd_share * self.width
         d = lay.dim
         self.means, self.values, self.covs = np.empty((0, d)), np.empty(0), np.empty((0, d, d))
@@ -211,25 +210,23 @@ class ModeFinder:
 
         from .fit import _run_one
 
-        lay, post = self.post.layout, self.post
-        lo, hi = lay.z_bounds()
+        post = self.post
+        lo, hi = post.fit_bounds()
+        d = len(lo)
         out, evals = [], 0
         for th in np.atleast_2d(thetas):
-            z0, _ = lay.split_theta(th[None])
-            u0 = np.clip((z0[0] - lo) / (hi - lo), 0.0, 1.0)
+            u0 = np.clip((th[:d] - lo) / (hi - lo), 0.0, 1.0)
             u, _, n = _run_one(nlopt, "LN_BOBYQA", post, lo, hi, u0, self.polish_budget,
                                int(rng.integers(2**31 - 1)))
-            z = lay.canonical(lo + (hi - lo) * u)
-            sig = np.sqrt(post.ssr(z)[0] / post.n_bins)
-            ls = np.log(np.clip(sig, post.sigma_bounds[0] * 1.001, post.sigma_bounds[1] * 0.999))
-            out.append(lay.theta_from_z(z, ls[None])[0])
+            v = post.canonical_fit((lo + (hi - lo) * u)[None])
+            out.append(post.theta_from_fit(v)[0])
             evals += n + 1
         return np.array(out), evals
 
     def add(self, optima: np.ndarray) -> int:
         """Merge optima (n, dim) into the known modes; new ones get a Laplace covariance.
         Returns the evaluations used."""
-        from .sampler import curvature_scales
+        from .ensemble import curvature_scales
 
         lay = self.post.layout
         values = self.post(optima)

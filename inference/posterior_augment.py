@@ -1,49 +1,54 @@
-"""Posterior augmentation: parameter vectors drawn from a calibrated posterior.
+"""Posterior augmentation: class vectors drawn from a calibrated posterior.
 
 Method (as many vectors as asked, even beyond the chain's length): a smoothed
 bootstrap of the stored draws. Each new vector is a uniformly resampled posterior
 draw plus Gaussian kernel jitter of ``jitter`` x the posterior sd of every
-parameter (phases: x the circular sd, then wrapped; fixed Gamma of engine 0: no
-jitter). The default jitter 0.1 inflates each marginal variance by 1% and makes
+parameter (phases: x the circular sd, then wrapped; the fixed Gamma of engine 0:
+no jitter). The default jitter 0.1 inflates each marginal variance by 1% and makes
 repeated draws distinct. Non-negative parameters that jitter below zero are
-reflected (|x|). Phases of draw i come from the measurement the resampled draw
-was paired with (all measurements used evenly); ``nuisance.phases="uniform"``
-replaces them by uniform phases, ``"relative"``/``"fixed"`` keep the posterior's.
-The fitted range offsets belong to the measurements and are not reused; the
-target's sub-bin position is the ``nuisance.range_jitter_bins`` option.
+reflected (|x|). Phases of draw i come from the measurement the resampled draw was
+paired with (all measurements used evenly); a marginal posterior holds no phases,
+and the acquisition that renders the vectors draws them.
+
+The vectors are rendered by a :class:`~mdaug.generator.augment.Renderer` under an
+acquisition: by default the one the posterior was calibrated under, with the
+carrier-return and noise-floor ranges the calibration measured
+(:meth:`CalibrationResult.measured_acquisition`).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..generator import ModelAugmenter, Nuisance
+from ..generator.augment import ModelAugmenter, Renderer, SigmaPSource, SpecimenSource, VectorSource
 from ..generator.params import NONNEGATIVE, N_PARAMS, PHASES
+from ..generator.specimens import SpecimenSpread
 from ..radar import RadarConfig
 from .priors import wrap
 from .result import CalibrationResult, circular_stats
 
 
-class PosteriorAugmenter(ModelAugmenter):
-    """Draws from a :class:`CalibrationResult` (or its NetCDF path) pushed through f(x)."""
+def load_posterior(posterior, label: str | None = None, allow_unconverged: bool = True) -> CalibrationResult:
+    """A CalibrationResult from a result or a NetCDF path (checked against ``label``)."""
+    if not isinstance(posterior, CalibrationResult):
+        posterior = CalibrationResult.load(posterior, class_name=label)
+    if not allow_unconverged and not posterior.converged:
+        raise ValueError(f"posterior of {posterior.class_name} did not converge: {posterior.diagnostics['reason']}")
+    return posterior
 
-    def __init__(self, posterior, *, label: str | None = None, nuisance: Nuisance = Nuisance(),
-                 normalisation: str = "peak", radar: RadarConfig = RadarConfig(), dtype: str = "float32",
-                 random_state=None, jitter: float = 0.1, allow_unconverged: bool = True):
-        super().__init__(nuisance=nuisance, normalisation=normalisation, radar=radar, dtype=dtype,
-                         random_state=random_state)
-        self.source = None
-        if not isinstance(posterior, CalibrationResult):
-            self.source = str(posterior)
-            posterior = CalibrationResult.load(posterior, class_name=label)
+
+class PosteriorSource(VectorSource):
+    """Vectors from a posterior by the smoothed bootstrap of the module doc."""
+
+    def __init__(self, posterior, *, label: str | None = None, jitter: float = 0.1, allow_unconverged: bool = True):
+        self.file = None if isinstance(posterior, CalibrationResult) else str(posterior)
+        self.posterior = load_posterior(posterior, label, allow_unconverged)
         if not (np.isfinite(jitter) and jitter >= 0):
             raise ValueError(f"jitter must be >= 0 (a multiple of the posterior sd), got {jitter}")
-        if not allow_unconverged and not posterior.converged:
-            raise ValueError(f"posterior of {posterior.class_name} did not converge: {posterior.diagnostics['reason']}")
-        self.posterior = posterior
-        self.label = (label or posterior.class_name).upper()
-        self.n_engines = posterior.n_engines
+        self.label = (label or self.posterior.class_name).upper()
+        self.n_engines = self.posterior.n_engines
         self.jitter = float(jitter)
-        self._pool = np.concatenate([posterior.draws(measurement=m) for m in range(posterior.n_measurements)])
+        post = self.posterior
+        self._pool = np.concatenate([post.draws(measurement=m) for m in range(post.n_measurements)])
         self._phase_cols = np.array([k * N_PARAMS + c for k in range(self.n_engines) for c in PHASES])
         self._nonneg = np.array([k * N_PARAMS + c for k in range(self.n_engines) for c in NONNEGATIVE])
         sd = self._pool.std(axis=0)
@@ -52,7 +57,7 @@ class PosteriorAugmenter(ModelAugmenter):
         sd[0] = 0.0  # Gamma of engine 0 is fixed
         self._sd = sd
 
-    def _draw(self, n: int, rng: np.random.Generator) -> np.ndarray:
+    def draw(self, n: int, rng: np.random.Generator) -> np.ndarray:
         idx = rng.integers(len(self._pool), size=n)
         x = self._pool[idx] + self.jitter * self._sd * rng.standard_normal((n, self._pool.shape[1]))
         x[:, self._phase_cols] = wrap(x[:, self._phase_cols])
@@ -61,7 +66,52 @@ class PosteriorAugmenter(ModelAugmenter):
 
     def settings(self) -> dict:
         d = self.posterior.diagnostics
-        return {**super().settings(), "strategy": "posterior", "posterior_file": self.source,
-                "class_name": self.posterior.class_name, "n_posterior_draws": int(len(self._pool)),
-                "jitter": self.jitter, "method": "smoothed bootstrap: resampled draws + Gaussian jitter x posterior sd",
+        return {"source": "posterior", "posterior_file": self.file, "class_name": self.posterior.class_name,
+                "n_posterior_draws": int(len(self._pool)), "jitter": self.jitter,
+                "method": "smoothed bootstrap: resampled draws + Gaussian jitter x posterior sd",
                 "posterior_converged": bool(d["converged"]), "best_fit": self.posterior.best_fit.tolist()}
+
+
+def _renderer(posterior: CalibrationResult, acquisition, **kw) -> Renderer:
+    return Renderer(acquisition if acquisition is not None else posterior.measured_acquisition(), **kw)
+
+
+class PosteriorAugmenter(ModelAugmenter):
+    """Posterior draws (optionally widened by a specimen model, ``specimens``) rendered
+    under ``acquisition`` (default: the calibration's, with its measured carrier and
+    noise ranges)."""
+
+    def __init__(self, posterior, *, label: str | None = None, acquisition=None, specimens: SpecimenSpread | None = None,
+                 normalisation: str = "peak", radar: RadarConfig = RadarConfig(), dtype: str = "float32",
+                 through_chain: bool = False, scene=None, random_state=None, jitter: float = 0.1,
+                 allow_unconverged: bool = True):
+        src = PosteriorSource(posterior, label=label, jitter=jitter, allow_unconverged=allow_unconverged)
+        if specimens is not None:
+            src = SpecimenSource(src, specimens)
+        post = src.posterior if specimens is None else src.base.posterior
+        super().__init__(src, _renderer(post, acquisition, normalisation=normalisation, dtype=dtype, radar=radar,
+                                        through_chain=through_chain, scene=scene), random_state=random_state)
+        self.posterior = post
+
+    def settings(self) -> dict:
+        return {**super().settings(), "strategy": "posterior" if not isinstance(self.source, SpecimenSource)
+                else "posterior+specimens"}
+
+
+class FitSigmaPAugmenter(ModelAugmenter):
+    """The published method done with the calibration: sigma_P around the calibrated
+    best fit (not the packaged reference), rendered under the calibration's
+    acquisition (default) with its measured carrier and noise ranges."""
+
+    def __init__(self, posterior, sigma_p: float = 0.2, *, label: str | None = None, acquisition=None,
+                 sign_policy: str = "reflect", normalisation: str = "peak", radar: RadarConfig = RadarConfig(),
+                 dtype: str = "float32", through_chain: bool = False, scene=None, random_state=None):
+        post = load_posterior(posterior, label)
+        src = SigmaPSource(post.best_fit, sigma_p, sign_policy=sign_policy, label=(label or post.class_name).upper())
+        super().__init__(src, _renderer(post, acquisition, normalisation=normalisation, dtype=dtype, radar=radar,
+                                        through_chain=through_chain, scene=scene), random_state=random_state)
+        self.posterior = post
+
+    def settings(self) -> dict:
+        return {**super().settings(), "strategy": "sigma_p_fit",
+                "posterior_converged": bool(self.posterior.converged)}

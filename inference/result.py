@@ -6,16 +6,20 @@ NetCDF layout (``.save`` / ``.load``):
   pooled (walkers are not independent chains, so there is one chain), as physical
   parameters: ``Gamma, A_a, w_a, ...`` with dims (chain, draw, engine), the phases
   ``phi_*`` with (chain, draw, measurement, engine), ``offset`` (range offset, FFT
-  bins) and ``sigma`` (noise level) with (chain, draw, measurement). Gamma of engine
-  0 is fixed (the scale of a normalised profile is not identifiable);
+  bins) and ``sigma`` (noise level) with (chain, draw, measurement) when the phases
+  were fitted; ``carrier`` (carrier-return ratio), ``offset`` (bins) and ``noise_db``
+  (noise floor, dB) with (chain, draw, measurement) when they were marginalised. Gamma of engine 0
+  is fixed (the scale of a normalised profile is not identifiable);
 * ``sample_stats``: ``lp`` (log posterior);
-* ``log_likelihood``: ``y`` per bin (chain, draw, measurement, bin) for LOO/WAIC;
+* ``log_likelihood``: ``y`` per bin (chain, draw, measurement, bin) for LOO/WAIC
+  (fitted phases) or per measurement (chain, draw, measurement) (marginal);
 * ``observed_data``: ``y`` the normalised measured profiles;
 * ``chain_trace``: the walkers' full path (every k-th step) for trace plots
   (with ``sampler="smc"``: one "step", the final particles; the tempering history --
   betas, ESS, acceptance, sweeps, log evidence -- is in the diagnostics);
 * ``posterior.attrs["mdaug"]``: JSON with the class, engine count, settings,
-  priors, fit, convergence diagnostics (tau, ESS, acceptance, converged, reason).
+  priors, the acquisition and the likelihood, fit, convergence diagnostics (tau,
+  ESS, acceptance, converged, reason).
 """
 from __future__ import annotations
 
@@ -28,7 +32,8 @@ import numpy as np
 from ..generator import IDX, N_PARAMS, PARAM_NAMES
 from .priors import PHASE_NAMES, SHARED, Priors, engine_lines, wrap
 
-FORMAT = "mdaug-posterior-1"
+FORMAT = "mdaug-posterior-2"
+READABLE_FORMATS = ("mdaug-posterior-1", FORMAT)
 IDENTIFIED_RATIO = 0.5  # posterior sd / prior sd above this: "stays near its prior"
 
 
@@ -59,8 +64,8 @@ class CalibrationResult:
             self.meta = json.loads(idata.posterior.attrs["mdaug"])
         except (AttributeError, KeyError, ValueError) as exc:
             raise ValueError("not an mdaug posterior (no 'mdaug' attributes in its posterior group)") from exc
-        if self.meta.get("format") != FORMAT:
-            raise ValueError(f"posterior format {self.meta.get('format')!r}; expected {FORMAT!r}")
+        if self.meta.get("format") not in READABLE_FORMATS:
+            raise ValueError(f"posterior format {self.meta.get('format')!r}; expected one of {READABLE_FORMATS}")
         self.priors = Priors.from_dict(self.meta["priors"])
 
     # ---- identity ----------------------------------------------------------------
@@ -75,6 +80,31 @@ class CalibrationResult:
     @property
     def n_measurements(self) -> int:
         return int(self.meta["n_measurements"])
+
+    @property
+    def marginal(self) -> bool:
+        """Whether the acquisition's phases were marginalised (no phases in the posterior)."""
+        return bool(self.meta.get("marginal", False))
+
+    @property
+    def acquisition(self):
+        """The :class:`~mdaug.generator.acquisition.Acquisition` the measurements were
+        modelled with (the published single chirp for files that predate it)."""
+        from ..generator.acquisition import Acquisition
+
+        return Acquisition.from_dict(self.meta.get("acquisition") or {}, "posterior attribute 'acquisition'")
+
+    def measured_acquisition(self):
+        """The calibration's acquisition with the carrier-return and noise-floor ranges it
+        measured (the range of the measurements' posterior medians), where it measured
+        them (marginal posteriors); otherwise the acquisition as stated."""
+        acq = self.acquisition
+        if not self.marginal:
+            return acq
+        carrier = np.median(self._var("carrier"), axis=0)  # (M,)
+        noise = np.median(self._var("noise_db"), axis=0)
+        return acq.replace(carrier=(float(carrier.min()), float(carrier.max())),
+                           noise_db=(float(noise.min()), float(noise.max())))
 
     @property
     def converged(self) -> bool:
@@ -113,11 +143,16 @@ class CalibrationResult:
         """Posterior draws as flat parameter vectors (n_draws, 13E).
 
         Phases are per measurement; ``measurement`` picks one, None (default) takes
-        draw i's phases from measurement i mod M (all measurements used evenly).
+        draw i's phases from measurement i mod M (all measurements used evenly). A
+        marginal posterior holds no phases (they were marginalised): they are 0, and
+        the acquisition that renders the vectors draws its own.
         """
         n, e, m = self.n_draws, self.n_engines, self.n_measurements
         x = np.empty((n, e, N_PARAMS))
         for name in PARAM_NAMES:
+            if name in PHASE_NAMES and self.marginal:
+                x[:, :, IDX[name]] = 0.0
+                continue
             v = self._var(name)
             if name in PHASE_NAMES:
                 pick = np.arange(n) % m if measurement is None else np.full(n, int(measurement))
@@ -163,14 +198,14 @@ class CalibrationResult:
                                             q95=float(q95), prior_sd=float(prior_sd), sd_ratio=ratio,
                                             identified=ratio <= IDENTIFIED_RATIO, kind="linear")
         for m in range(self.n_measurements):
-            for k in range(self.n_engines):
+            for k in range(self.n_engines if not self.marginal else 0):
                 for name in PHASE_NAMES:
                     cs = circular_stats(self._var(name)[:, m, k])
                     ratio = 1.0 - cs["R"]
                     rows[f"{name}[{k}]@{m}"] = dict(mean=cs["mean"], sd=cs["sd"], q05=cs["q05"], q95=cs["q95"],
                                                     prior_sd=np.inf, sd_ratio=ratio,
                                                     identified=ratio <= IDENTIFIED_RATIO, kind="circular")
-            for name in ("offset", "sigma"):
+            for name in (("carrier", "offset", "noise_db") if self.marginal else ("offset", "sigma")):
                 v = self._var(name)[:, m]
                 q05, q95 = np.quantile(v, [0.05, 0.95])
                 rows[f"{name}@{m}"] = dict(mean=float(np.mean(v)), sd=float(np.std(v)), q05=float(q05),
@@ -185,9 +220,13 @@ class CalibrationResult:
         d, f = self.diagnostics, self.fit
         lines = [f"class {self.class_name}: {self.n_engines} engine(s), {self.n_measurements} measurement(s), "
                  f"{self.n_draws} posterior draws",
-                 f"fit ({f['algorithm']}, {len(f['starts_misfit'])} starts, {f['seconds']:.1f} s): "
-                 f"misfit {f['misfit']:.2f}, {f['n_agree']} start(s) agree, noise sigma "
-                 f"{np.round(f['sigma'], 4).tolist()}"]
+                 f"acquisition: {self.acquisition.describe()}; "
+                 + ("phases marginalised (synthetic likelihood)" if self.marginal else "phases fitted"),
+                 f"fit ({f['algorithm']}, {len(f['starts_misfit'])} starts, {f['seconds']:.1f} s"
+                 f"{', reused from the checkpoint' if d.get('fit_reused') else ''}): "
+                 f"misfit {f['misfit']:.2f}, {f['n_agree']} start(s) agree, "
+                 + (f"noise floor {np.round(f['sigma'], 1).tolist()} dB" if self.marginal else
+                    f"noise sigma {np.round(f['sigma'], 4).tolist()}")]
         lines += [f"  note: {n}" for n in f["notes"]]
         if d.get("sampler") == "smc":
             lines.append(f"SMC: {d['smc_n_particles']} particles, {d['smc_stages']} tempering stages, "
@@ -196,7 +235,8 @@ class CalibrationResult:
                          f"{d['smc_unique_share']:.0%}, log evidence {d['smc_log_z']:.2f}, modes known to the "
                          f"jumps {d.get('smc_modes', 0)}")
         else:
-            lines.append(f"MCMC: {d['n_walkers']} walkers x {d['chain_steps']} steps ({d['seconds']:.1f} s), "
+            resumed = f", resumed at step {d['resumed_at']}" if d.get("resumed_at") else ""
+            lines.append(f"MCMC: {d['n_walkers']} walkers x {d['chain_steps']} steps ({d['seconds']:.1f} s{resumed}), "
                          f"max tau {d['tau_max']:.0f} steps, chain/tau {d['steps_over_tau']:.1f}, "
                          f"min ESS {d['ess_min']:.0f}, acceptance {d['acceptance_mean']:.2f}, "
                          f"burn {d['burn']}, thin {d['thin']}")
@@ -221,7 +261,7 @@ class CalibrationResult:
             for name in SHARED + (("Gamma",) if k else ()):
                 cols.append(self._var(name)[:, k])
                 names.append(f"{name}[{k}]")
-            for name in PHASE_NAMES:
+            for name in (PHASE_NAMES if not self.marginal else ()):
                 v = self._var(name)[:, 0, k]
                 mu = circular_stats(v)["mean"]
                 cols.append(wrap(v - mu) + mu)  # unwrapped around the circular mean

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 FIT_ALGORITHMS = ("GN_CRS2_LM", "GN_MLSL_LDS", "GN_DIRECT_L", "GN_ISRES", "GN_ESCH")
 LOCAL_ALGORITHMS = ("LN_BOBYQA", "LN_NELDERMEAD", "LN_SBPLX")
 SAMPLERS = ("emcee", "smc")
+LIKELIHOODS = ("auto", "marginal", "fitted")
 
 
 @dataclass(frozen=True)
@@ -20,7 +21,9 @@ class CalibrationSettings:
     MCMC (emcee): ``n_walkers`` walkers (0 = 3 x dimensions; at least 2 x dim + 2 and 32), run in
     blocks of ``check_every`` steps until the chain is ``min_tau_multiple`` integrated
     autocorrelation times long and tau changed by less than ``tau_rtol`` between
-    checks, or ``max_steps`` is reached (then the result is flagged not converged).
+    checks: convergence sets the length. ``time_budget`` (seconds of sampling; None =
+    none) and ``max_steps`` (None = no cap) end a run that has not converged by
+    then (flagged not converged).
     Burn-in ``burn_tau`` x max tau, thinning ``thin_tau`` x min tau (at least 1).
     ``store_every``: keep every k-th step in memory and in the HDF5 checkpoint (0 =
     auto: the chain stays under ~160 MB; tau, burn-in and thinning count steps).
@@ -34,7 +37,14 @@ class CalibrationSettings:
     :mod:`.priors`), so the posterior covers every labelling the prior allows; 0
     switches it off.
 
-    Model: ``normalisation`` of measured and model profiles (SPEC section 2);
+    Likelihood: ``likelihood`` ``auto`` (default) uses the acquisition: when its
+    phases are random (``uniform``) or it averages several ramps, the phases are
+    marginalised (:class:`.synthetic.SyntheticLikelihood`, ``n_acquisitions`` O
+    simulated acquisitions of ``ramps_drawn`` ramps each, compared every ``stride``
+    bins); the published single chirp at fixed phases fits them
+    (:class:`.likelihood.LogPosterior`, below). ``marginal`` / ``fitted`` force one.
+
+    Model (fitted phases): ``normalisation`` of measured and model profiles (SPEC section 2);
     ``alignment`` ``tone`` (default) compares the data with model windows centred on
     the carrier bin and fits a per-measurement offset of the tone (uniform on the
     priors' ``offset_bins``, +-4 bins by default), ``peak`` uses f(x)'s argmax
@@ -63,7 +73,8 @@ class CalibrationSettings:
     fit_budget: int = 6000
     polish_budget: int = 2000
     n_walkers: int = 0
-    max_steps: int = 30000
+    max_steps: int | None = None
+    time_budget: float | None = 1200.0
     check_every: int = 500
     store_every: int = 0
     min_tau_multiple: float = 50.0
@@ -90,6 +101,10 @@ class CalibrationSettings:
     smc_jump: float = 0.1
     smc_polish: int = 8
     relabel: float = 0.1
+    likelihood: str = "auto"
+    n_acquisitions: int = 16
+    ramps_drawn: int = 16
+    stride: int = 8
 
     def __post_init__(self) -> None:
         if self.fit_algorithm not in FIT_ALGORITHMS:
@@ -97,9 +112,14 @@ class CalibrationSettings:
         if self.local_algorithm not in LOCAL_ALGORITHMS + ("none",):
             raise ValueError(f"local_algorithm must be one of {LOCAL_ALGORITHMS} or 'none', "
                              f"got {self.local_algorithm!r}")
-        positive = {"n_starts": self.n_starts, "fit_budget": self.fit_budget, "max_steps": self.max_steps,
+        positive = {"n_starts": self.n_starts, "fit_budget": self.fit_budget,
                     "check_every": self.check_every, "min_tau_multiple": self.min_tau_multiple,
-                    "threads": self.threads, "init_ball": self.init_ball}
+                    "threads": self.threads, "init_ball": self.init_ball, "ramps_drawn": self.ramps_drawn,
+                    "stride": self.stride}
+        if self.max_steps is not None:
+            positive["max_steps"] = self.max_steps
+        if self.time_budget is not None:
+            positive["time_budget"] = self.time_budget
         for name, value in positive.items():
             if not value > 0:
                 raise ValueError(f"CalibrationSettings.{name} must be > 0, got {value!r}")
@@ -122,6 +142,11 @@ class CalibrationSettings:
         if self.n_particles < 0 or self.n_particles == 1 or self.smc_max_sweeps < 2 or self.smc_max_stages < 1:
             raise ValueError("CalibrationSettings: n_particles must be 0 (auto) or >= 2, smc_max_sweeps >= 2 "
                              "and smc_max_stages >= 1")
+        if self.likelihood not in LIKELIHOODS:
+            raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {self.likelihood!r}")
+        if self.n_acquisitions < 2:
+            raise ValueError(f"n_acquisitions must be >= 2 (simulated acquisitions per likelihood), got "
+                             f"{self.n_acquisitions}")
         if self.dtype not in ("float32", "float64"):
             raise ValueError(f"dtype must be float32 or float64, got {self.dtype!r}")
 
@@ -131,7 +156,7 @@ class CalibrationSettings:
         chain, 3 particles polished per mode search. It will usually end before
         50 tau and say so (converged=False)."""
         base = dict(n_starts=2, fit_budget=1000, polish_budget=2000, max_steps=1000, check_every=250,
-                    n_walkers=32, smc_polish=3)
+                    n_walkers=32, smc_polish=3, n_acquisitions=8, ramps_drawn=4)
         base.update(kw)
         return cls(**base)
 

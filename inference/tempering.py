@@ -51,6 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from .priors import wrap
+from .samplers import CalibrationInterrupted, SamplerRun, stop_on_sigint
 
 GAMMA_MIX = ((0.25, 0.5), (1.0, 0.4), (None, 0.1))  # (factor of 2.38/sqrt(2 dim) or None = 1.0, weight)
 JITTER = 1e-6  # relative Gaussian jitter of DE proposals (in units of the population sd)
@@ -202,7 +203,8 @@ def _save_checkpoint(path: Path, fp: str, rng, **arrays) -> None:
 def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float = 0.5, p_move: float = 0.99,
             min_sweeps: int = 2, max_sweeps: int = 40, max_stages: int = 500, min_acceptance: float = 0.02,
             phase_cols=(), bounds=None, p_redraw: float = 0.0, modes=None, p_jump: float = 0.0,
-            relabel=None, p_relabel: float = 0.0, backend_path=None, fp: str = "") -> SMCResult:
+            relabel=None, p_relabel: float = 0.0, backend_path=None, fp: str = "",
+            progress: bool | None = False) -> SMCResult:
     """Adaptive tempered SMC from the prior to the posterior (see the module docstring).
 
     target: theta (n, dim) -> (log prior (n,), log likelihood (n,)), vectorised;
@@ -219,7 +221,9 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
     before every rejuvenation to look for new optima and for the mode mixture that
     ``p_jump`` of the proposals are drawn from (see :func:`de_sweep`). relabel,
     p_relabel: an exact-symmetry move (see :func:`de_sweep`).
-    backend_path: npz checkpoint (resumable, see above).
+    backend_path: npz checkpoint (resumable, see above). progress: a bar of beta
+    (0 -> 1) on a terminal. A Ctrl-C stops after the current stage (its checkpoint
+    saved) with :class:`.samplers.CalibrationInterrupted`.
     """
     t0 = time.perf_counter()
     path = None if backend_path is None else Path(backend_path)
@@ -241,37 +245,52 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
             raise ValueError("SMC: a prior draw has a non-finite log prior or log likelihood")
         betas, log_z, ess_h, acc_h, sw_h, n_evals, resumed_at = [0.0], 0.0, [], [], [], n_particles, 0
     n = theta.shape[0]
-    while betas[-1] < 1.0 and len(betas) - 1 < max_stages:
-        beta = betas[-1]
-        b = next_beta(ll, beta, ess_target * n)
-        lw = (b - beta) * ll
-        top = lw.max()
-        w = np.exp(lw - top)
-        log_z += top + np.log(w.mean())
-        w /= w.sum()
-        ess_h.append(1.0 / np.sum(w * w))
-        idx = systematic_resample(w, rng)
-        theta, ll, lprior = theta[idx], ll[idx], lprior[idx]
-        mixture = None
-        if modes is not None:
-            n_evals += modes.update(theta, b, rng)
-            mixture = modes.mixture(b, rng)
-        acc_sum, sweeps, need = 0.0, 0, min_sweeps
-        while sweeps < need:
-            theta, ll, lprior, a = de_sweep(theta, ll, lprior, b, target, rng, phase_cols, bounds, p_redraw,
-                                            mixture, p_jump, relabel, p_relabel)
-            n_evals += n
-            sweeps += 1
-            acc_sum += a
-            rate = min(max(acc_sum / sweeps, 1e-3), 0.999)
-            need = int(np.clip(np.ceil(np.log(1 - p_move) / np.log(1 - rate)), min_sweeps, max_sweeps))
-        betas.append(b)
-        acc_h.append(acc_sum / sweeps)
-        sw_h.append(sweeps)
-        if path is not None:
-            extra = {} if modes is None else {f"modes_{k}": v for k, v in modes.state().items()}
-            _save_checkpoint(path, fp, rng, theta=theta, ll=ll, lprior=lprior, betas=betas, log_z=log_z,
-                             ess=ess_h, acceptance=acc_h, sweeps=sw_h, n_evals=n_evals, **extra)
+    from ..radar.progress import progress_bar
+
+    bar = progress_bar(total=1000, initial=int(1000 * betas[-1]), desc="SMC (beta x 1000)", unit="",
+                       progress=progress)
+    try:
+        with stop_on_sigint() as flag:
+            while betas[-1] < 1.0 and len(betas) - 1 < max_stages:
+                beta = betas[-1]
+                b = next_beta(ll, beta, ess_target * n)
+                lw = (b - beta) * ll
+                top = lw.max()
+                w = np.exp(lw - top)
+                log_z += top + np.log(w.mean())
+                w /= w.sum()
+                ess_h.append(1.0 / np.sum(w * w))
+                idx = systematic_resample(w, rng)
+                theta, ll, lprior = theta[idx], ll[idx], lprior[idx]
+                mixture = None
+                if modes is not None:
+                    n_evals += modes.update(theta, b, rng)
+                    mixture = modes.mixture(b, rng)
+                acc_sum, sweeps, need = 0.0, 0, min_sweeps
+                while sweeps < need:
+                    theta, ll, lprior, a = de_sweep(theta, ll, lprior, b, target, rng, phase_cols, bounds, p_redraw,
+                                                    mixture, p_jump, relabel, p_relabel)
+                    n_evals += n
+                    sweeps += 1
+                    acc_sum += a
+                    rate = min(max(acc_sum / sweeps, 1e-3), 0.999)
+                    need = int(np.clip(np.ceil(np.log(1 - p_move) / np.log(1 - rate)), min_sweeps, max_sweeps))
+                betas.append(b)
+                acc_h.append(acc_sum / sweeps)
+                sw_h.append(sweeps)
+                if path is not None:
+                    extra = {} if modes is None else {f"modes_{k}": v for k, v in modes.state().items()}
+                    _save_checkpoint(path, fp, rng, theta=theta, ll=ll, lprior=lprior, betas=betas, log_z=log_z,
+                                     ess=ess_h, acceptance=acc_h, sweeps=sw_h, n_evals=n_evals, **extra)
+                bar.update(int(1000 * betas[-1]) - bar.n)
+                bar.set_postfix_str(f"stage {len(betas) - 1}, acceptance {acc_h[-1]:.2f}")
+                if flag["stop"]:
+                    raise CalibrationInterrupted(f"stopped after stage {len(betas) - 1}")
+    except KeyboardInterrupt as exc:
+        where = f"; {len(betas) - 1} stage(s) are saved in {path}" if path is not None else ""
+        raise CalibrationInterrupted(f"SMC interrupted{where}") from exc
+    finally:
+        bar.close()
     stages = len(betas) - 1
     if betas[-1] < 1.0:
         converged, reason = False, (f"NOT CONVERGED: SMC stage budget of {max_stages} ended at beta "
@@ -293,7 +312,7 @@ def posterior_target(post):
     """(log prior, log likelihood) of a :class:`.likelihood.LogPosterior` for a batch theta (n, dim)."""
 
     def target(theta):
-        lp = post.layout.log_prior(theta, post.sigma_bounds)
+        lp = post.layout.log_prior(theta)
         out = post(theta)
         ll = np.where(np.isfinite(lp), out - np.where(np.isfinite(lp), lp, 0.0), -np.inf)
         return lp, ll
@@ -301,43 +320,37 @@ def posterior_target(post):
     return target
 
 
-def calibrate_smc(post, settings, seed, backend_path=None, fp: str = "", fit=None):
-    """Run :func:`run_smc` on a LogPosterior with the calibration settings; returns
-    (ChainResult with the N particles as one stored step, SMCResult).
+class SMCSampler:
+    """The tempered-SMC plugin of :mod:`.samplers` (see the module docstring)."""
 
-    ChainResult mapping: chain (1, N, dim), burn 0, thin 1; tau is set to N / ESS
-    with ESS the weight ESS of the last reweighting (the particles are equally
-    weighted afterwards but share ancestors: a conservative count of independent
-    draws), so ``ChainResult.ess`` reads that ESS for every coordinate.
-    """
-    from .sampler import ChainResult
+    name = "smc"
 
-    layout = post.layout
-    n = settings.n_particles or max(500, 40 * layout.dim)
-    n += n % 2
-    sigma = (settings.sigma_min, settings.sigma_max)
-    lo, hi = layout.z_bounds()
-    bounds = (np.r_[lo, np.full(layout.M, np.log(sigma[0]))], np.r_[hi, np.full(layout.M, np.log(sigma[1]))])
-    modes = None
-    if settings.smc_jump > 0:
-        from .modes import ModeFinder
+    def run(self, post, fit, settings, seed_seq, *, backend_path=None, fingerprint: str = "") -> SamplerRun:
+        layout = post.layout
+        n = settings.n_particles or max(500, 40 * layout.dim)
+        n += n % 2
+        bounds = layout.theta_bounds()
+        modes = None
+        if settings.smc_jump > 0:
+            from .modes import ModeFinder
 
-        seeds = None
-        if fit is not None:
-            sig = np.sqrt(post.ssr(fit.starts_z) / post.n_bins)
-            seeds = layout.theta_from_z(fit.starts_z, np.log(np.clip(sig, sigma[0] * 1.001, sigma[1] * 0.999)))
-        modes = ModeFinder(post, n_polish=settings.smc_polish, seed_thetas=seeds)
-    smc = run_smc(posterior_target(post), lambda k, rng: layout.sample_prior(k, rng, sigma), n, seed,
-                  ess_target=settings.smc_ess, p_move=settings.smc_p_move, max_sweeps=settings.smc_max_sweeps,
-                  max_stages=settings.smc_max_stages, phase_cols=layout.phase_cols, bounds=bounds,
-                  p_redraw=settings.smc_redraw, modes=modes, p_jump=settings.smc_jump,
-                  relabel=layout.random_relabel, p_relabel=settings.relabel, backend_path=backend_path, fp=fp)
-    ess = float(smc.ess[-1]) if smc.ess.size else float(n)
-    acc = float(smc.acceptance[-1]) if smc.acceptance.size else 1.0
-    chain = ChainResult(chain=smc.particles[None], log_prob=(smc.log_lik + smc.log_prior)[None],
-                        tau=np.full(layout.dim, n / ess), burn=0, thin=1, acceptance=np.full(n, acc), converged=smc.converged, reason=smc.reason,
-                        seconds=smc.seconds, resumed_at=smc.resumed_at, store_every=1)
-    return chain, smc
+            seeds = None if fit is None else post.theta_from_fit(fit.starts_z)
+            modes = ModeFinder(post, n_polish=settings.smc_polish, seed_thetas=seeds)
+        tail = None if layout.marginal else (settings.sigma_min, settings.sigma_max)
+        smc = run_smc(posterior_target(post), lambda k, rng: layout.sample_prior(k, rng, tail), n, seed_seq,
+                      ess_target=settings.smc_ess, p_move=settings.smc_p_move, max_sweeps=settings.smc_max_sweeps,
+                      max_stages=settings.smc_max_stages, phase_cols=layout.phase_cols, bounds=bounds,
+                      p_redraw=settings.smc_redraw, modes=modes, p_jump=settings.smc_jump,
+                      relabel=layout.random_relabel, p_relabel=settings.relabel, backend_path=backend_path,
+                      fp=fingerprint, progress=settings.progress)
+        ess = float(smc.ess[-1]) if smc.ess.size else float(n)
+        acc = float(smc.acceptance[-1]) if smc.acceptance.size else 1.0
+        # the N particles as one stored step; tau = N / ESS (ESS: the weight ESS of the last
+        # reweighting: the particles are equally weighted afterwards but share ancestors)
+        return SamplerRun(chain=smc.particles[None], log_prob=(smc.log_lik + smc.log_prior)[None],
+                          tau=np.full(layout.dim, n / ess), burn=0, thin=1, acceptance=np.full(n, acc),
+                          converged=smc.converged, reason=smc.reason, seconds=smc.seconds,
+                          resumed_at=smc.resumed_at, store_every=1, sampler="smc", extra=smc_diagnostics(smc))
 
 
 def smc_diagnostics(smc: SMCResult) -> dict:

@@ -8,13 +8,16 @@ Example ``study.toml``::
 
     [data]                      # omit for the embedded simulated scene
     calibration = { HELI = "old_heli.npz", QUAD = "old_quad.mat" }
-    test = { old = "old.csv", new = "new.npz" }
+    select = { HELI = "more_heli.npz", QUAD = "more_quad.npz" }   # optional: held-out, for choices
+    test = { new = "new.npz" }
 
     [protocol]
     sigma_p = [0.0, 0.1, 0.2, 0.3]
-    sweep_n_per_class = 2000
+    acquisition_ramps = 32      # when the files do not say ramps_per_frame
     cnn_n_per_class = 16000
-    cnn_epochs = 50
+
+The simulated default is a 32-ramp campaign (``[simulation] ramps = 4`` or
+``mdaug run --ramps 4`` gives the 4-ramp one).
 """
 from __future__ import annotations
 
@@ -23,37 +26,37 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..generator import Nuisance, load_reference
+from ..generator import load_reference
 from ..radar import NORMALISATIONS
 from .validation import ConfigTypeError, check_types, convert, field_types
 
 PUBLISHED_SIGMA_PS = (0.0, 0.05, 0.10, 0.15, 0.20, 0.25, 0.30, 0.40, 0.50, 0.60)
 
-NUISANCES = ("published", "uniform-phases", "matched")
-"""Named nuisance treatments (SPEC 3.1) compared along the study's nuisance axis:
+STRATEGIES = ("sigma_p_published", "sigma_p_fit", "posterior", "posterior_specimens", "tsaug")
+"""The training-set strategies compared (what each assumes about new specimens is
+stated in the report, :data:`mdaug.reports.study.STRATEGY_TEXT`):
 
-* ``published``: relative phases, no range jitter, one ramp (the published augmenter);
-* ``uniform-phases``: phases uniform on the circle, one bin of sub-bin range jitter;
-* ``matched``: as ``uniform-phases`` and averaging as many ramps as the acquisition
-  does (``protocol.acquisition_ramps``; the simulated scene averages 4).
+* ``sigma_p_published``: the published method: sigma_P around the packaged class
+  reference, one chirp at its phases (relative phase perturbation);
+* ``sigma_p_fit``: sigma_P around the calibrated best fit, rendered through the
+  calibration's acquisition (its ramps, random phases, carrier and noise);
+* ``posterior``: draws from the calibrated posterior, through the acquisition;
+* ``posterior_specimens``: posterior draws widened by the specimen model (a common
+  motor-speed factor, amplitude spread, ...), for drones other than the one
+  calibrated; its width chosen on the selection set;
+* ``tsaug``: the conventional baseline, tsaug on the calibration measurements.
 """
-
-
-def nuisance_preset(name: str, acquisition_ramps: int) -> Nuisance:
-    if name == "published":
-        return Nuisance(phases="relative", range_jitter_bins=0.0, n_ramps=1)
-    if name == "uniform-phases":
-        return Nuisance(phases="uniform", range_jitter_bins=1.0, n_ramps=1)
-    if name == "matched":
-        return Nuisance(phases="uniform", range_jitter_bins=1.0, n_ramps=acquisition_ramps)
-    raise ValueError(f"unknown nuisance treatment {name!r}; known {NUISANCES}")
 
 
 @dataclass
 class DataConfig:
-    """Measured files (None: the embedded simulated scene)."""
+    """Measured files (none: the embedded simulated scene). ``select``: other
+    measurements of the calibration drones, held out for the study's choices
+    (optional: without it the choices use the calibration measurements themselves,
+    and the report says so)."""
 
     calibration: dict[str, str] = field(default_factory=dict)
+    select: dict[str, str] = field(default_factory=dict)
     test: dict[str, str] = field(default_factory=dict)
 
 
@@ -61,7 +64,9 @@ class DataConfig:
 class SimulationConfig:
     """The embedded default scene (used when no measured files are given)."""
 
-    n_calibration: int = 3          # "old" acquisitions of the reference specimen per class
+    ramps: int = 32                 # ramps per frame of every simulated acquisition (K)
+    n_calibration: int = 5          # acquisitions of the reference specimen per class, calibrated on
+    n_select: int = 12              # more of them per class, held out for the study's choices
     n_new: dict[str, int] = field(default_factory=lambda: {"HELI": 44, "QUAD": 92})
     new_specimens: int = 3          # new drone specimens per class in the test campaign
     large_factor: int = 4           # a second, larger new-drone campaign for tighter intervals
@@ -70,25 +75,27 @@ class SimulationConfig:
 
 @dataclass
 class ProtocolConfig:
-    sigma_p: tuple[float, ...] = PUBLISHED_SIGMA_PS
-    models: tuple[str, ...] = ("svm", "nb", "xgb")
-    sweep_n_per_class: int = 2000     # 4,000 training profiles: within a few points of 32,000 (benchmark)
-    cnn_n_per_class: int = 8000     # 16,000 profiles; the published 32,000 is cnn_n_per_class = 16000
-    cnn_epochs: int = 50
-    cnn_patience: int | None = 10   # early stopping on validation loss; None trains all epochs
-    tsaug_n_per_class: int = 4000
-    tsaug_epochs: int = 100
-    nuisances: tuple[str, ...] = NUISANCES
-    acquisition_ramps: int = 4      # ramps each measured profile averages (the simulated scene's K)
-    cnn_strategies: tuple[str, ...] = ("sigma_p", "sigma_p_matched", "posterior", "tsaug")
+    sigma_p: tuple[float, ...] = (0.0, 0.1, 0.2, 0.3, 0.4)  # the published grid is PUBLISHED_SIGMA_PS
+    specimen_widths: tuple[float, ...] = (0.5, 1.0, 2.0)    # x the specimen model's default spreads
+    models: tuple[str, ...] = ("svm", "nb", "xgb")          # the fast classifiers that rank the choices
+    sweep_n_per_class: int = 1500
+    cnn_n_per_class: int = 6000     # 12,000 profiles; the published 32,000 is cnn_n_per_class = 16000
+    cnn_epochs: int = 40
+    cnn_patience: int | None = 8    # early stopping on validation loss; None trains all epochs
+    tsaug_n_per_class: int = 3000
+    tsaug_epochs: int = 60
+    strategies: tuple[str, ...] = STRATEGIES
+    acquisition_ramps: int | None = None  # measured files that do not say ramps_per_frame: their K
+    through_chain: bool = False     # render model-based training sets through the scene + radar chain
     normalisation: str = "peak"
     n_boot: int = 1000
-    # calibration budget: one noisy profile gives a multimodal posterior that does not
-    # reach 50 tau even in 30,000 steps; 4,000 steps keep posterior means within ~0.1 sd
-    # of a 24,000-step chain (tests/benchmarks/inference.py) at a sixth of the time
-    calibration_max_steps: int = 4000
-    calibration_starts: int = 4
-    calibration_fit_budget: int = 6000
+    # calibration: the phases marginalised under the campaign's acquisition; a time budget
+    # per class (the run is flagged not converged when it ends first)
+    calibration_time_budget: float = 240.0
+    calibration_starts: int = 2
+    calibration_fit_budget: int = 1500
+    calibration_draws: int = 16
+    calibration_ramps_drawn: int = 16
 
 
 @dataclass
@@ -113,11 +120,11 @@ class StudyConfig:
     def quick_version(self) -> "StudyConfig":
         """Small sizes for a run of about a minute (tests, first look)."""
         p = dataclasses.replace(
-            self.protocol, sigma_p=(0.0, 0.1, 0.2, 0.4), models=("nb", "xgb"), sweep_n_per_class=300,
-            cnn_n_per_class=1000, cnn_epochs=15, tsaug_n_per_class=300, tsaug_epochs=15, n_boot=300,
-            nuisances=("published", "matched"), calibration_max_steps=500, calibration_starts=1,
-            calibration_fit_budget=600)
-        s = dataclasses.replace(self.simulation, n_calibration=2, n_new={c: 24 for c in self.classes},
+            self.protocol, sigma_p=(0.0, 0.2), specimen_widths=(1.0,), models=("nb", "xgb"), sweep_n_per_class=200,
+            cnn_n_per_class=600, cnn_epochs=8, cnn_patience=4, tsaug_n_per_class=300, tsaug_epochs=8, n_boot=200,
+            calibration_time_budget=15.0, calibration_starts=1, calibration_fit_budget=200, calibration_draws=6,
+            calibration_ramps_drawn=2)
+        s = dataclasses.replace(self.simulation, ramps=4, n_calibration=3, n_select=6, n_new={c: 24 for c in self.classes},
                                 new_specimens=2, large_factor=1, ceiling_per_class=80)
         return dataclasses.replace(self, quick=True, protocol=p, simulation=s)
 
@@ -142,42 +149,46 @@ class StudyConfig:
                 load_reference(c)
             except ValueError as exc:
                 raise ValueError(f"{src}: classes: {exc}") from None
-        for group in ("calibration", "test"):
+        for group in ("calibration", "select", "test"):
             for name, path in getattr(self.data, group).items():
-                if group == "calibration" and name not in self.classes:
+                if group in ("calibration", "select") and name not in self.classes:
                     raise ValueError(f"{src}: data.calibration names unknown class {name!r} "
                                      f"(classes: {list(self.classes)})")
                 if not Path(path).is_file():
                     raise ValueError(f"{src}: data.{group}.{name}: file not found: {path}")
         if self.data.test and set(self.data.calibration) != set(self.classes):
             raise ValueError(f"{src}: data.calibration must give a file for every class {list(self.classes)}")
+        if self.data.select and set(self.data.select) != set(self.classes):
+            raise ValueError(f"{src}: data.select must give a file for every class {list(self.classes)} (or none)")
         if self.data.calibration and not self.data.test:
             raise ValueError(f"{src}: data.calibration is given but data.test is not: give both, or neither "
                              "(the embedded simulated scene)")
         p = self.protocol
-        unknown = [n for n in p.nuisances if n not in NUISANCES]
-        if unknown:
-            raise ValueError(f"{src}: protocol.nuisances: unknown {unknown}; known {list(NUISANCES)}")
-        if p.acquisition_ramps < 1:
-            raise ValueError(f"{src}: protocol.acquisition_ramps must be >= 1")
+        if p.acquisition_ramps is not None and p.acquisition_ramps < 1:
+            raise ValueError(f"{src}: protocol.acquisition_ramps must be >= 1 (leave it out to use the files')")
+        bad = [w for w in p.specimen_widths if not w >= 0]
+        if bad or not p.specimen_widths:
+            raise ValueError(f"{src}: protocol.specimen_widths must be a non-empty list of numbers >= 0, "
+                             f"got {p.specimen_widths}")
+        if not p.calibration_time_budget > 0 or p.calibration_draws < 2 or p.calibration_ramps_drawn < 1:
+            raise ValueError(f"{src}: protocol.calibration_time_budget must be > 0 s, calibration_draws >= 2 and "
+                             "calibration_ramps_drawn >= 1")
         bad = [s for s in p.sigma_p if not 0 <= s <= 1]
         if bad or not p.sigma_p:
             raise ValueError(f"{src}: protocol.sigma_p must be a non-empty list in [0, 1], got {p.sigma_p}")
         for name in ("sweep_n_per_class", "cnn_n_per_class", "cnn_epochs", "tsaug_n_per_class", "tsaug_epochs",
-                     "calibration_max_steps", "calibration_starts", "calibration_fit_budget"):
+                     "calibration_starts", "calibration_fit_budget"):
             if getattr(p, name) < 1:
                 raise ValueError(f"{src}: protocol.{name} must be >= 1")
         _check_names(src, "protocol.models", p.models, ("svm", "nb", "xgb", "cnn"))
         _check_names(src, "protocol.normalisation", (p.normalisation,), NORMALISATIONS)
-        strategies = _cnn_strategies()
-        if strategies:
-            _check_names(src, "protocol.cnn_strategies", p.cnn_strategies, strategies)
+        _check_names(src, "protocol.strategies", p.strategies, STRATEGIES)
         if p.cnn_patience is not None and p.cnn_patience < 1:
             raise ValueError(f"{src}: protocol.cnn_patience must be >= 1 (leave it out to train every epoch)")
         if p.n_boot < 0:
             raise ValueError(f"{src}: protocol.n_boot must be >= 0")
         sim = self.simulation
-        for name in ("n_calibration", "new_specimens", "large_factor", "ceiling_per_class"):
+        for name in ("ramps", "n_calibration", "n_select", "new_specimens", "large_factor", "ceiling_per_class"):
             if getattr(sim, name) < 1:
                 raise ValueError(f"{src}: simulation.{name} must be >= 1")
         for cls, n in sim.n_new.items():
@@ -192,14 +203,14 @@ class StudyConfig:
         from ..radar import RadarConfig, load_profiles
 
         length = RadarConfig().slice_length
-        for group in ("calibration", "test"):
+        for group in ("calibration", "select", "test"):
             for name, path in getattr(self.data, group).items():
                 ps = load_profiles(path)  # errors name the file and field
                 if ps.profiles.shape[1] != length:
                     raise ValueError(f"{self.source}: data.{group}.{name}: {path}: field 'profiles' has "
                                      f"{ps.profiles.shape[1]}-bin profiles; the study takes {length}-bin "
                                      "signatures (run 'mdaug process' first)")
-                if group == "calibration":
+                if group in ("calibration", "select"):
                     ps.select(name)
                     ps.check_no_zero_rows(name)
                 else:
@@ -214,14 +225,6 @@ def _check_names(src: str, where: str, names, known) -> None:
     unknown = [n for n in names if n not in known]
     if unknown or not names:
         raise ValueError(f"{src}: {where}: unknown {unknown or 'empty list'}; known {list(known)}")
-
-
-def _cnn_strategies() -> tuple:
-    try:
-        from .study import STRATEGY_NUISANCE
-    except ImportError:  # the study module is being reworked: skip this one check
-        return ()
-    return tuple(STRATEGY_NUISANCE)
 
 
 SECTIONS = ("data", "protocol", "simulation")
@@ -266,7 +269,7 @@ def load_config(path) -> StudyConfig:
             raise ValueError(f"{path}: {name} = {top[name]!r}: expected a table ([{name}] section)")
     cfg = _section(StudyConfig, top, path, None)
     data = _section(DataConfig, raw.get("data", {}), path, "data")
-    for group in ("calibration", "test"):
+    for group in ("calibration", "select", "test"):
         setattr(data, group, {k: str((path.parent / v).resolve()) for k, v in getattr(data, group).items()})
     cfg.data = data
     cfg.simulation = _section(SimulationConfig, raw.get("simulation", {}), path, "simulation")

@@ -1,7 +1,10 @@
 """The study's independent jobs as picklable top-level functions.
 
 Each job takes one dict (its settings and its own seed) and returns plain data, so
-any executor (serial, processes, dask) gives the same results.
+any executor (serial, processes, dask) gives the same results. A training-set
+strategy is a small dict (``spec``) that :func:`augmenters` turns into one
+augmenter per class; :func:`training_set` is the study's one way to build a set
+(through :func:`mdaug.generator.make_dataset`, or tsaug's :func:`tsaug_set`).
 """
 from __future__ import annotations
 
@@ -18,57 +21,101 @@ def _threads(n: int = 1) -> None:
     threadpool_limits(n)
 
 
-def sigma_p_training_set(sigma_p: float, seed: int, *, classes, n_per_class: int, nuisance: dict,
-                         normalisation: str):
-    """(X, y) synthetic profiles of every class at one sigma_P (the sweep's make_train)."""
-    from ..generator import Nuisance, SigmaPAugmenter, make_dataset
+def augmenters(spec: dict, classes) -> list:
+    """One augmenter per class for a model-based strategy spec:
 
-    augs = [SigmaPAugmenter(c, sigma_p, nuisance=Nuisance(**nuisance), normalisation=normalisation)
-            for c in classes]
-    ds = make_dataset(augs, n_per_class, seed, progress=False)
-    return ds.profiles, ds.labels
+    ``strategy`` (sigma_p_published | sigma_p_fit | posterior | posterior_specimens),
+    ``sigma_p``, ``width`` (specimen model), ``posteriors`` {class: NetCDF},
+    ``acquisition`` (dict, for the model-based strategies other than the published
+    one: None = each calibration's measured acquisition), ``through_chain``,
+    ``normalisation``."""
+    from ..generator import Acquisition, Renderer, SigmaPSource, SpecimenSource, SpecimenSpread
+    from ..generator.augment import ModelAugmenter
+
+    kind, norm = spec["strategy"], spec.get("normalisation", "peak")
+    out = []
+    for c in classes:
+        if kind == "sigma_p_published":
+            src = SigmaPSource(c, spec["sigma_p"], perturb_phases=True)
+            acq = Acquisition()
+        else:
+            from ..inference.posterior_augment import PosteriorSource, load_posterior
+
+            post = load_posterior(spec["posteriors"][c], c)
+            acq = (post.measured_acquisition() if spec.get("acquisition") is None
+                   else Acquisition.from_dict(spec["acquisition"]))
+            if kind == "sigma_p_fit":
+                src = SigmaPSource(post.best_fit, spec["sigma_p"], perturb_phases=False, label=c)
+            elif kind in ("posterior", "posterior_specimens"):
+                src = PosteriorSource(post, label=c)
+                if kind == "posterior_specimens" and spec.get("width"):
+                    src = SpecimenSource(src, SpecimenSpread(width=float(spec["width"])))
+            else:
+                raise ValueError(f"unknown training strategy {kind!r}")
+        out.append(ModelAugmenter(src, Renderer(acq, norm, through_chain=bool(spec.get("through_chain")))))
+    return out
 
 
-def training_set(job: dict):
-    """(X, y, groups) for one CNN strategy: sigma_p, sigma_p_matched, posterior or tsaug.
+def training_set(spec: dict, classes, n_per_class: int, seed):
+    """(X, y, groups) for one strategy spec; groups (tsaug only) is each copy's source
+    profile, so that the CNN's validation split never holds a copy of a profile it
+    trains on; None for model-based sets."""
+    if spec["strategy"] == "tsaug":
+        from ..classify import tsaug_set
 
-    groups (tsaug only) is each copy's source profile, so that the CNN's validation
-    split never holds a copy of a profile it trains on; None for model-based sets."""
-    from ..generator import Nuisance, SigmaPAugmenter, make_dataset
-
-    kind, n, seed = job["strategy_kind"], job["n_per_class"], job["seed"]
-    if kind == "tsaug":
-        from ..classify import TsaugAugmenter
-
-        aug = TsaugAugmenter(np.asarray(job["profiles"]), np.asarray(job["labels"]), random_state=seed,
-                             normalisation=job["normalisation"])
-        X, y, sources = aug.sample(n, return_sources=True)
+        X, y, sources = tsaug_set(np.asarray(spec["profiles"]), np.asarray(spec["labels"]), n_per_class, seed,
+                                  normalisation=spec.get("normalisation", "peak"))
         per_class = [np.unique(sources[y == c]).size for c in np.unique(y)]
         # a grouped 80/10/10 split needs a few sources per class; with fewer, the
         # validation split holds copies of training profiles (documented in the report)
         return X, y, (sources if min(per_class) >= MIN_GROUPS else None)
-    nuisance = Nuisance(**job["nuisance"])
-    if kind == "sigma_p":
-        augs = [SigmaPAugmenter(c, job["sigma_p"], nuisance=nuisance, normalisation=job["normalisation"])
-                for c in job["classes"]]
-    elif kind == "posterior":
-        from ..inference import PosteriorAugmenter
+    from ..generator import make_dataset
 
-        augs = [PosteriorAugmenter(job["posteriors"][c], label=c, nuisance=nuisance,
-                                   normalisation=job["normalisation"]) for c in job["classes"]]
-    else:
-        raise ValueError(f"unknown training strategy {kind!r}")
-    ds = make_dataset(augs, n, seed, progress=False)
+    ds = make_dataset(augmenters(spec, classes), n_per_class, seed, progress=False)
     return ds.profiles, ds.labels, None
 
 
-def train_and_test(job: dict) -> dict:
-    """Make a strategy's training set, train one classifier, test on every test set."""
-    from ..classify import evaluate, make_classifier, save_model
+def _evaluate_all(clf, tests: dict, classes, n_boot: int, seed) -> dict:
+    from ..classify import evaluate
+
+    out = {}
+    for name, (Xt, yt) in tests.items():
+        t0 = time.perf_counter()
+        m = evaluate(np.asarray(yt), clf.predict(np.asarray(Xt)), labels=sorted(classes), n_boot=n_boot,
+                     random_state=seed)
+        m["predict_seconds"] = time.perf_counter() - t0
+        out[name] = m
+    return out
+
+
+def candidate(job: dict) -> dict:
+    """One choice candidate (a strategy at one sigma_P or width): its training set, the
+    fast classifiers trained on it and scored on every set given (the selection set
+    ranks the candidates; the test sets are only reported)."""
+    from ..classify import make_classifier
 
     _threads(job.get("threads", 1))
     t0 = time.perf_counter()
-    X, y, groups = training_set(job)
+    X, y, _ = training_set(job["spec"], job["classes"], job["n_per_class"], job["seed"])
+    t_data = time.perf_counter() - t0
+    models = {}
+    for name in job["models"]:
+        clf = make_classifier(name, random_state=job["seed"], normalisation=job["spec"].get("normalisation", "peak"))
+        t1 = time.perf_counter()
+        clf.fit(X, y)
+        models[name] = {"train_seconds": time.perf_counter() - t1,
+                        "tests": _evaluate_all(clf, job["tests"], job["classes"], job["n_boot"], job["seed"])}
+    return {"spec": {k: v for k, v in job["spec"].items() if k not in ("profiles", "labels")},
+            "data_seconds": t_data, "n_train": int(len(y)), "models": models}
+
+
+def train_and_test(job: dict) -> dict:
+    """Make a strategy's training set, train one classifier, test on every set given."""
+    from ..classify import make_classifier, save_model
+
+    _threads(job.get("threads", 1))
+    t0 = time.perf_counter()
+    X, y, groups = training_set(job["spec"], job["classes"], job["n_per_class"], job["seed"])
     t_data = time.perf_counter() - t0
     params = dict(job.get("model_params", {}))
     clf = make_classifier(job["model"], random_state=job["seed"], **params)
@@ -77,14 +124,8 @@ def train_and_test(job: dict) -> dict:
     t_train = time.perf_counter() - t1
     if job.get("model_path"):
         save_model(clf, job["model_path"])
-    tests = {}
-    for name, (Xt, yt) in job["tests"].items():
-        t2 = time.perf_counter()
-        pred = clf.predict(np.asarray(Xt))
-        m = evaluate(np.asarray(yt), pred, labels=sorted(job["classes"]), n_boot=job["n_boot"],
-                     random_state=job["seed"])
-        m["predict_seconds"] = time.perf_counter() - t2
-        tests[name] = m
-    return {"strategy": job["name"], "model": job["model"], "n_train": int(len(y)), "sigma_p": job.get("sigma_p"),
-            "nuisance": job.get("nuisance"),
-            "data_seconds": t_data, "train_seconds": t_train, "tests": tests}
+    spec = {k: v for k, v in job["spec"].items() if k not in ("profiles", "labels")}
+    return {"strategy": job["name"], "model": job["model"], "n_train": int(len(y)), "spec": spec,
+            "sigma_p": spec.get("sigma_p"), "width": spec.get("width"), "data_seconds": t_data,
+            "train_seconds": t_train,
+            "tests": _evaluate_all(clf, job["tests"], job["classes"], job["n_boot"], job["seed"])}

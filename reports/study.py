@@ -1,348 +1,435 @@
-"""The main job: calibrate, augment two ways, classify, compare (``mdaug run``).
+"""The main job: calibrate under the acquisition, augment several ways, classify, compare.
 
 Stages (each cached in ``DIR/stages`` so an interrupted run resumes):
 
-1. ``data``: the measured sets: calibration profiles per class and the test sets
-   (``old``: other acquisitions of the calibration drones, ``new``: new drone
-   specimens, ``mix``: both, ``new_large``: a bigger new-drone campaign). From the
-   embedded scene simulator by default, or from the files of a study config.
-2. ``calibrate_<CLASS>``: nlopt fit + emcee posterior of each class (mdaug.inference).
-3. ``sweep_<nuisance>``: the published sigma_P protocol with the fast classifiers, for
-   every nuisance treatment on the study's nuisance axis.
-4. ``choice``: sigma_P picked the published way (best on the new-drone test set: it
-   peeks at the test data) and without peeking (best on the ``old`` set, i.e. other
-   acquisitions of the calibration drones; ties go to the smaller sigma_P).
-5. ``cnn_<strategy>``: the CNN trained on each strategy's set (sigma_P at the
-   non-peeking choice with published and uniform nuisances, posterior draws, tsaug
-   on the calibration measurements) and tested on every test set.
-6. ``ceiling``: for simulated campaigns, a classifier trained on the simulator's own
-   data (other seeds and specimens): the separability ceiling of the setting.
-7. ``speed``: speed against error of the generator's float32 and float64 paths.
+1. ``data``: the measured sets. Simulated (default): a campaign of the
+   class-reference drones (``calibration_<CLASS>``: the acquisitions calibrated on;
+   ``select``: more of them, held out for the study's choices), a campaign of new
+   drone specimens (``new``) and a larger one (``new_large``); every acquisition
+   averages ``simulation.ramps`` ramps and goes through the radar chain. Or the
+   files of a study config.
+2. ``calibrate_<CLASS>``: each class calibrated from its measurements under the
+   campaign's acquisition (the phases marginalised; :mod:`mdaug.inference`).
+3. ``candidates``: every strategy at every value of its setting (sigma_P, the
+   specimen width) trains the fast classifiers; they are scored on the selection set
+   (the choice) and, for the report only, on the test sets.
+4. ``choice``: each strategy's setting with the best balanced accuracy on the
+   selection set (the choice never sees a test set; the published peeking choice
+   of sigma_P is recorded beside it, labelled as such).
+5. ``cnn_<strategy>``: the CNN trained on each strategy at its chosen setting,
+   scored on the selection and test sets; the best strategy is the one with the best
+   balanced accuracy on the selection set.
+6. ``ceiling``: simulated scenes: classifiers trained on the scene simulator's own
+   data (other specimens): the separability ceiling of the acquisition.
+7. ``speed``: speed against error of the stages.
 """
 from __future__ import annotations
 
 import dataclasses
 import json
 import time
-from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from ..radar import atomic_savez, atomic_write, load_profiles
-from .cache import StageCache, settings_key
-from .config import StudyConfig, nuisance_preset
-from .executor import make_executor
+from ..radar.seeds import child_seed
 from . import jobs
+from .cache import StageCache, settings_key
+from .config import StudyConfig
+from .executor import make_executor
 
-STRATEGY_NUISANCE = {"sigma_p": "published", "sigma_p_matched": "matched", "posterior": "matched", "tsaug": None}
+PARAMETER = {"sigma_p_published": "sigma_p", "sigma_p_fit": "sigma_p", "posterior": None,
+             "posterior_specimens": "width", "tsaug": None}
+"""The setting each strategy's choice is about (None: nothing to choose)."""
+
+STRATEGY_TEXT = {
+    "sigma_p_published": "the published method: sigma_P around the packaged class reference, one chirp at its "
+                         "phases; assumes new drones are the reference drone seen as the fit was, up to sigma_P",
+    "sigma_p_fit": "sigma_P around the calibrated best fit, through the measured acquisition; assumes new drones "
+                   "are the calibrated drone up to an unstructured relative spread sigma_P",
+    "posterior": "draws from the calibrated posterior, through the measured acquisition; assumes new drones are "
+                 "the calibrated drone (only its measurement uncertainty)",
+    "posterior_specimens": "posterior draws widened by the specimen model (common motor-speed factor, amplitude "
+                           "spread), through the measured acquisition; assumes new drones differ from the "
+                           "calibrated one as drones of one model do",
+    "tsaug": "tsaug (drift, pool, reverse) on the calibration measurements; assumes new drones look like "
+             "distorted copies of the measured ones",
+}
+TIE = 0.01  # balanced accuracy within this of the best counts as a tie
+TIE_RULE = {"sigma_p": "smaller", "width": "larger"}
+"""How ties go: the smaller sigma_P (the published rule), the larger specimen width
+(the selection set holds only the calibrated drone, which cannot tell how much new
+drones differ: among equals, assume more variation)."""
 
 
-def _seed(cfg: StudyConfig, *keys) -> int:
-    """A child seed of the study's one seed, stable for a given stage name."""
-    words = [sum(ord(ch) * 31 ** i for i, ch in enumerate(str(k))) % (2**31) for k in keys]
-    return int(np.random.SeedSequence([cfg.seed, *words]).generate_state(1)[0])
+def _stage_seed(cfg: StudyConfig, *keys) -> int:
+    return child_seed(cfg.seed, *keys)
 
 
 class Study:
     def __init__(self, cfg: StudyConfig, out: Path, log=print):
-        self.cfg = cfg.validate()
+        self.cfg = cfg.validate(check_files=False)
         self.out = Path(out)
         self.out.mkdir(parents=True, exist_ok=True)
         for sub in ("data", "posteriors", "models", "figures"):
             (self.out / sub).mkdir(exist_ok=True)
         self.log = log
         self.cache = StageCache(self.out, log)
-        # each stage's cache key covers only what the stage depends on, so changing,
-        # say, the CNN's epochs does not redo the calibration
         c, p = cfg.to_dict(), cfg.to_dict()["protocol"]
-        self.key = settings_key(c["seed"], c["classes"], c["data"], c["simulation"])  # the measured sets
+        self.key = settings_key(c["seed"], c["classes"], c["data"], c["simulation"], p["acquisition_ramps"])
         self.calib_key = settings_key(self.key, c["quick"], {k: v for k, v in p.items() if k.startswith("calibration")})
-        self.sweep_key = settings_key(self.key, [p[k] for k in ("sigma_p", "models", "sweep_n_per_class", "acquisition_ramps",
-                                                                 "normalisation", "n_boot")])
-        self.cnn_key = settings_key(self.calib_key, [p[k] for k in ("cnn_n_per_class", "cnn_epochs", "cnn_patience", "acquisition_ramps",
-                                                                     "tsaug_n_per_class", "tsaug_epochs",
-                                                                     "normalisation", "n_boot")])
+        self.cand_key = settings_key(self.calib_key, [p[k] for k in ("sigma_p", "specimen_widths", "models",
+                                                                     "sweep_n_per_class", "strategies",
+                                                                     "through_chain", "normalisation", "n_boot")])
+        self.cnn_key = settings_key(self.cand_key, [p[k] for k in ("cnn_n_per_class", "cnn_epochs", "cnn_patience",
+                                                                   "tsaug_n_per_class", "tsaug_epochs")])
 
-    def nuisance(self, name: str):
-        return nuisance_preset(name, self.cfg.protocol.acquisition_ramps)
-
-    # ---- stage 1: data -----------------------------------------------------
+    # ---- stage 1: data -------------------------------------------------------------
     def data(self) -> dict:
         def compute():
-            sets = self._simulated_sets() if self.cfg.simulated else self._file_sets()
-            index = {}
+            sets, acq = self._simulated_sets() if self.cfg.simulated else self._file_sets()
+            index = {"sets": {}, "acquisition": acq.to_dict()}
             for name, (X, y) in sets.items():
                 path = self.out / "data" / f"{name}.npz"
-                atomic_savez(path, profiles=np.asarray(X, dtype=np.float64), labels=np.asarray(y).astype(str))
-                index[name] = {"path": str(path), "n": int(len(y)),
-                               "per_class": {c: int(np.sum(np.asarray(y) == c)) for c in self.cfg.classes}}
+                atomic_savez(path, profiles=np.asarray(X, dtype=np.float64), labels=np.asarray(y).astype(str),
+                             ramps_per_frame=np.array(acq.ramps), acquisition=np.array(json.dumps(acq.to_dict())))
+                index["sets"][name] = {"path": str(path), "n": int(len(y)),
+                                       "per_class": {c: int(np.sum(np.asarray(y) == c)) for c in self.cfg.classes}}
             return index
         return self.cache.run("data", self.key, compute)
 
-    def _file_sets(self) -> dict:
-        sets = {}
-        for cls, path in self.cfg.data.calibration.items():
-            ps = load_profiles(path)
-            sets[f"calibration_{cls}"] = (ps.select(cls), np.full(len(ps.select(cls)), cls))
+    def _file_sets(self):
+        from ..generator.acquisition import Acquisition, acquisition_from_file
+
+        sets, acqs = {}, []
+        groups = [("calibration", f"calibration_{{}}"), ("select", "select_{}")]
+        for group, fmt in groups:
+            for cls, path in getattr(self.cfg.data, group).items():
+                ps = load_profiles(path)
+                X = ps.select(cls)
+                sets[fmt.format(cls)] = (X, np.full(len(X), cls))
+                acqs.append((path, acquisition_from_file(ps.extra, path)))
+        if self.cfg.data.select:
+            sets["select"] = tuple(np.concatenate([sets.pop(f"select_{c}")[i] for c in self.cfg.classes])
+                                   for i in (0, 1))
         for name, path in self.cfg.data.test.items():
             ps = load_profiles(path)
-            unknown = sorted(set(ps.classes) - set(self.cfg.classes))
-            if unknown:
-                raise ValueError(f"{path}: field 'labels' holds class(es) {unknown} not in the study's "
-                                 f"classes {list(self.cfg.classes)}")
             sets[name] = (ps.profiles, ps.labels)
-        return sets
+            acqs.append((path, acquisition_from_file(ps.extra, path)))
+        stated = [(p, a) for p, a in acqs if a is not None]
+        k = self.cfg.protocol.acquisition_ramps
+        for (p1, a1) in stated:
+            if a1.ramps != stated[0][1].ramps:
+                raise ValueError(f"{p1} says ramps_per_frame = {a1.ramps} but {stated[0][0]} says "
+                                 f"{stated[0][1].ramps}: one study is one acquisition")
+            if k is not None and a1.ramps != k:
+                raise ValueError(f"{p1} says ramps_per_frame = {a1.ramps} but {self.cfg.source}: "
+                                 f"protocol.acquisition_ramps = {k}")
+        acq = stated[0][1] if stated else Acquisition.measured(k or 1)
+        return sets, acq
 
-    def _simulated_sets(self) -> dict:
-        from ..generator.scene import SceneConfig, simulate_campaign
+    def _simulated_sets(self):
+        from ..generator.scene import SceneConfig, scene_acquisition, simulate_campaign
 
-        sim, sets = self.cfg.simulation, {}
-        old, new, large = {}, {}, {}
+        sim = self.cfg.simulation
+        scene = SceneConfig(n_ramps=sim.ramps)
+        reference = dataclasses.replace(scene, **{f.name: 0.0 for f in dataclasses.fields(SceneConfig)
+                                                  if "spread" in f.name})
+        sets, select, new, large = {}, {}, {}, {}
         for cls in self.cfg.classes:
-            n_old_test = max(sim.n_new.get(cls, 10) // 3, 4)
-            camp = simulate_campaign(cls, 1, sim.n_calibration + n_old_test, _seed(self.cfg, "old", cls),
-                                     scene=dataclasses.replace(SceneConfig(), **self._reference_specimen()))
+            camp = simulate_campaign(cls, 1, sim.n_calibration + sim.n_select, _stage_seed(self.cfg, "reference", cls),
+                                     scene=reference)
             sets[f"calibration_{cls}"] = (camp.profiles[: sim.n_calibration], camp.labels[: sim.n_calibration])
-            old[cls] = (camp.profiles[sim.n_calibration:], camp.labels[sim.n_calibration:])
+            select[cls] = (camp.profiles[sim.n_calibration:], camp.labels[sim.n_calibration:])
             n = sim.n_new.get(cls, 44)
-            camp = simulate_campaign(cls, sim.new_specimens, n, _seed(self.cfg, "new", cls))
+            camp = simulate_campaign(cls, sim.new_specimens, n, _stage_seed(self.cfg, "new", cls), scene=scene)
             new[cls] = (camp.profiles, camp.labels)
             if sim.large_factor > 1:
                 camp = simulate_campaign(cls, 2 * sim.new_specimens, n * sim.large_factor,
-                                         _seed(self.cfg, "new_large", cls))
+                                         _stage_seed(self.cfg, "new_large", cls), scene=scene)
                 large[cls] = (camp.profiles, camp.labels)
 
         def cat(parts):
             return (np.concatenate([p[0] for p in parts.values()]), np.concatenate([p[1] for p in parts.values()]))
 
-        sets["old"], sets["new"] = cat(old), cat(new)
-        sets["mix"] = (np.concatenate([sets["old"][0], sets["new"][0]]),
-                       np.concatenate([sets["old"][1], sets["new"][1]]))
+        sets["select"], sets["new"] = cat(select), cat(new)
         if large:
             sets["new_large"] = cat(large)
-        return sets
-
-    @staticmethod
-    def _reference_specimen() -> dict:
-        """Scene overrides that make the specimen the class reference itself."""
-        from ..generator.scene import SceneConfig
-
-        fields = {f.name for f in dataclasses.fields(SceneConfig)}
-        return {name: 0.0 for name in fields if "spread" in name}
+        return sets, scene_acquisition(scene)
 
     def load_set(self, name: str):
         ps = load_profiles(self.out / "data" / f"{name}.npz")
         return ps.profiles, ps.labels
 
-    def test_sets(self, index: dict) -> dict:
-        return {name: self.load_set(name) for name in index if not name.startswith("calibration_")}
+    def acquisition(self, index: dict):
+        from ..generator.acquisition import Acquisition
 
-    # ---- stage 2: calibration --------------------------------------------------
-    def calibrate(self, cls: str) -> dict:
+        return Acquisition.from_dict(index["acquisition"], "study data")
+
+    def selection_set(self, index: dict) -> tuple[str, tuple, str]:
+        """(name, (X, y), what it is) of the set the study's choices are made on."""
+        if "select" in index["sets"]:
+            return "select", self.load_set("select"), "held-out acquisitions of the calibration drones"
+        parts = [self.load_set(f"calibration_{c}") for c in self.cfg.classes]
+        return "calibration", (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])), \
+            "the calibration measurements themselves (no held-out set was given: the choices are optimistic)"
+
+    def test_sets(self, index: dict) -> dict:
+        return {name: self.load_set(name) for name in index["sets"]
+                if not name.startswith("calibration_") and name != "select"}
+
+    # ---- stage 2: calibration --------------------------------------------------------
+    def calibrate(self, cls: str, acquisition) -> dict:
         from ..inference import CalibrationSettings, calibrate
+        from ..inference.priors import engine_lines
 
         def compute():
             X, _ = self.load_set(f"calibration_{cls}")
             p = self.cfg.protocol
-            base = CalibrationSettings.quick(polish_budget=600) if self.cfg.quick else CalibrationSettings()
-            settings = base.replace(max_steps=p.calibration_max_steps, n_starts=p.calibration_starts,
-                                    fit_budget=p.calibration_fit_budget,
-                                    check_every=min(base.check_every, p.calibration_max_steps))
+            base = CalibrationSettings.quick() if self.cfg.quick else CalibrationSettings()
+            settings = base.replace(time_budget=p.calibration_time_budget, n_starts=p.calibration_starts,
+                                    fit_budget=p.calibration_fit_budget, n_acquisitions=p.calibration_draws,
+                                    ramps_drawn=p.calibration_ramps_drawn, max_steps=None)
             checkpoint = self.out / "posteriors" / f"{cls}.chain.h5"
-            res = calibrate(X, cls, settings=settings, random_state=_seed(self.cfg, "calibrate", cls),
-                            backend_path=checkpoint)
+            res = calibrate(X, cls, acquisition=acquisition, settings=settings,
+                            random_state=_stage_seed(self.cfg, "calibrate", cls), backend_path=checkpoint)
             nc = self.out / "posteriors" / f"{cls}.nc"
             res.save(nc)
-            checkpoint.unlink(missing_ok=True)  # only needed to resume an interrupted chain
+            for f in checkpoint.parent.glob(checkpoint.name + "*"):
+                f.unlink()  # only needed to resume an interrupted run
             corner_png = self.out / "figures" / f"corner_{cls}.png"
             trace_png = self.out / "figures" / f"trace_{cls}.png"
-            res.plot_corner(corner_png, max_params=16)  # a 52-parameter corner is unreadable
+            res.plot_corner(corner_png)
             res.plot_trace(trace_png)
+            lines = res.lines()  # (n, E, 4, 2): frequency rad/s, amplitude m
+            w_ref, a_ref, _ = engine_lines(res.priors.centres)
             return {"posterior": str(nc), "corner": str(corner_png), "trace": str(trace_png),
                     "converged": bool(res.converged), "diagnostics": _jsonable(res.diagnostics),
-                    "summary": _jsonable(res.summary()), "n_profiles": int(len(X))}
+                    "summary": _jsonable(res.summary()), "n_profiles": int(len(X)),
+                    "acquisition": res.acquisition.to_dict(),
+                    "measured_acquisition": res.measured_acquisition().to_dict(),
+                    "lines": {"frequency_q": np.quantile(lines[..., 0], [0.05, 0.5, 0.95], axis=0).tolist(),
+                              "amplitude_q": np.quantile(lines[..., 1], [0.05, 0.5, 0.95], axis=0).tolist(),
+                              "reference_frequency": np.sort(w_ref, axis=-1).tolist()}}
         return self.cache.run(f"calibrate_{cls}", settings_key(self.calib_key, cls), compute)
 
-    # ---- stage 3: sigma_P sweeps ---------------------------------------------
-    def sweep(self, nuisance: str, tests: dict, executor) -> dict:
-        from ..classify import sigma_p_sweep
-
+    # ---- stages 3-4: candidates and the choice ---------------------------------------------
+    def specs(self, calib: dict, tsaug_sources) -> dict:
+        """{strategy: [spec, ...]}: every strategy at every value of its setting."""
         p = self.cfg.protocol
+        posts = {c: calib[c]["posterior"] for c in self.cfg.classes}
+        common = {"normalisation": p.normalisation, "through_chain": p.through_chain}
+        out = {}
+        for name in p.strategies:
+            if name in ("sigma_p_published", "sigma_p_fit"):
+                out[name] = [{"strategy": name, "sigma_p": float(s), "posteriors": posts, **common} for s in p.sigma_p]
+            elif name == "posterior":
+                out[name] = [{"strategy": name, "posteriors": posts, **common}]
+            elif name == "posterior_specimens":
+                out[name] = [{"strategy": name, "width": float(w), "posteriors": posts, **common}
+                             for w in p.specimen_widths]
+            elif name == "tsaug":
+                out[name] = [{"strategy": "tsaug", "profiles": tsaug_sources[0], "labels": tsaug_sources[1],
+                              "normalisation": p.normalisation}]
+        for specs in out.values():  # the published path is the published single chirp
+            for s in specs:
+                if s["strategy"] == "sigma_p_published":
+                    s["through_chain"] = False
+        return out
+
+    def candidates(self, specs: dict, select, tests: dict, executor) -> dict:
+        p = self.cfg.protocol
+        sel_name, sel_data, _ = select
+        sets = {sel_name: sel_data, **tests}
 
         def compute():
-            make_train = partial(jobs.sigma_p_training_set, classes=list(self.cfg.classes),
-                                 n_per_class=p.sweep_n_per_class,
-                                 nuisance=dataclasses.asdict(self.nuisance(nuisance)),
-                                 normalisation=p.normalisation)
-            make_train.cache_key = settings_key(self.sweep_key, nuisance)  # lets the sweep resume per sigma_P
-            res = sigma_p_sweep(make_train, tests, sigma_ps=p.sigma_p, models=p.models, n_boot=p.n_boot,
-                                random_state=_seed(self.cfg, "sweep", nuisance), executor=executor,
-                                cache_dir=self.out / "stages" / f"sweep_{nuisance}")  # progress: bar of the cells on a terminal
-            png = self.out / "figures" / f"sweep_{nuisance}.png"
-            res.plot(png)
-            res.to_csv(self.out / f"sweep_{nuisance}.csv")
-            return {"rows": _jsonable(res.rows), "figure": str(png)}
-        return self.cache.run(f"sweep_{nuisance}", settings_key(self.sweep_key, nuisance), compute)
+            todo = [(name, i, s) for name, ss in specs.items() if PARAMETER[name] is not None for i, s in enumerate(ss)]
+            job_list = [{"spec": s, "classes": list(self.cfg.classes), "n_per_class": p.sweep_n_per_class,
+                         "seed": _stage_seed(self.cfg, "candidate", name, i), "models": list(p.models),
+                         "tests": sets, "n_boot": p.n_boot} for name, i, s in todo]
+            from ..radar.progress import progress_bar
+
+            rows = []
+            with progress_bar(total=len(job_list), desc="choice candidates", unit="candidate", leave=False) as bar:
+                for (name, i, spec), res in zip(todo, _imap(executor, jobs.candidate, job_list)):
+                    for model, m in res["models"].items():
+                        for set_name, metrics in m["tests"].items():
+                            rows.append({"strategy": name, "parameter": PARAMETER[name],
+                                         "value": spec[PARAMETER[name]], "model": model, "set": set_name,
+                                         "accuracy": metrics["accuracy"],
+                                         "balanced_accuracy": metrics["balanced_accuracy"],
+                                         "balanced_ci": (metrics.get("ci") or {}).get("balanced_accuracy"),
+                                         "min_recall": min(v["recall"] for v in metrics["per_class"].values()
+                                                           if v["recall"] is not None),
+                                         "train_seconds": m["train_seconds"]})
+                    bar.update(1)
+            return {"rows": rows, "selection_set": sel_name}
+        return self.cache.run("candidates", self.cand_key, compute)
 
     @staticmethod
-    def choose_sigma(rows: list[dict], test_set: str) -> dict:
-        """The sigma_P with the best mean accuracy over the fast classifiers on one set."""
-        by_sigma: dict[float, list[float]] = {}
+    def choose(rows: list[dict], strategy: str, on: str) -> dict:
+        """The value of ``strategy``'s setting with the best mean balanced accuracy (over
+        the fast classifiers) on set ``on``; ties (within TIE) go by TIE_RULE."""
+        param = PARAMETER[strategy]
+        by_value: dict[float, list[float]] = {}
         for r in rows:
-            if r["test_set"] == test_set:
-                by_sigma.setdefault(float(r["sigma_p"]), []).append(r["accuracy"])
-        means = {s: float(np.mean(v)) for s, v in sorted(by_sigma.items())}
+            if r["strategy"] == strategy and r["set"] == on:
+                by_value.setdefault(float(r["value"]), []).append(r["balanced_accuracy"])
+        if not by_value:
+            return {"value": None, "set": on, "scores": {}}
+        means = {v: float(np.mean(s)) for v, s in sorted(by_value.items())}
         best = max(means.values())
-        chosen = min(s for s, m in means.items() if m == best)
-        return {"sigma_p": chosen, "test_set": test_set, "mean_accuracy": means}
+        tied = [v for v, m in means.items() if m >= best - TIE]
+        value = min(tied) if TIE_RULE.get(param) == "smaller" else max(tied)
+        return {"value": value, "parameter": param, "set": on, "scores": means, "rule": f"best mean balanced "
+                f"accuracy of {', '.join(sorted({r['model'] for r in rows}))}; ties within {TIE} to the "
+                f"{TIE_RULE.get(param)} {param}"}
 
-    # ---- stage 5: CNN per strategy -----------------------------------------------
-    def cnn_jobs(self, sigma: dict[str, float], tests: dict, calib: dict) -> list[dict]:
-        """One job per CNN strategy; model-based ones at their nuisance's chosen sigma_P."""
+    # ---- stage 5: CNN per strategy -------------------------------------------------------------
+    def cnn_jobs(self, specs: dict, choice: dict, select, tests: dict) -> list[dict]:
         p = self.cfg.protocol
-        # tsaug (as published) augments the measurements of the old drones: the
-        # calibration profiles and the 'old' set; it is then tested only on sets that
-        # share no profile with its sources
-        sources = [self.load_set(f"calibration_{c}") for c in self.cfg.classes]
-        if "old" in tests:
-            sources.append(tests["old"])
-        src_X = np.concatenate([s[0] for s in sources])
-        src_y = np.concatenate([s[1] for s in sources])
-        unseen = {k: v for k, v in tests.items() if k not in ("old", "mix")}
+        sel_name, sel_data, _ = select
         out = []
-        for name in p.cnn_strategies:
-            job = {"name": name, "model": "cnn", "classes": list(self.cfg.classes), "tests": tests,
-                   "n_boot": p.n_boot, "normalisation": p.normalisation,
-                   "seed": _seed(self.cfg, "cnn", name),
+        for name, ss in specs.items():
+            param = PARAMETER[name]
+            spec = ss[0] if param is None else next(s for s in ss if s[param] == choice[name]["value"])
+            tsaug = name == "tsaug"
+            job = {"name": name, "model": "cnn", "classes": list(self.cfg.classes), "spec": spec,
+                   "n_per_class": p.tsaug_n_per_class if tsaug else p.cnn_n_per_class,
+                   "tests": {sel_name: sel_data, **tests} if not tsaug else
+                   {k: v for k, v in {sel_name: sel_data, **tests}.items() if k != "calibration"},
+                   "n_boot": p.n_boot, "seed": _stage_seed(self.cfg, "cnn", name),
+                   "model_params": {"epochs": p.tsaug_epochs if tsaug else p.cnn_epochs, "patience": p.cnn_patience,
+                                    "normalisation": p.normalisation},
                    "model_path": str(self.out / "models" / f"cnn_{name}.zip")}
-            if name == "tsaug":
-                job.update(strategy_kind="tsaug", profiles=src_X, labels=src_y, n_per_class=p.tsaug_n_per_class,
-                           model_params={"epochs": p.tsaug_epochs, "patience": p.cnn_patience},
-                           tests=unseen or tests)
-            else:
-                kind = "posterior" if name == "posterior" else "sigma_p"
-                if kind == "sigma_p":
-                    job["sigma_p"] = sigma[STRATEGY_NUISANCE[name]]
-                job.update(strategy_kind=kind, n_per_class=p.cnn_n_per_class,
-                           nuisance=dataclasses.asdict(self.nuisance(STRATEGY_NUISANCE[name])),
-                           posteriors={c: calib[c]["posterior"] for c in self.cfg.classes},
-                           model_params={"epochs": p.cnn_epochs, "patience": p.cnn_patience})
             out.append(job)
         return out
+
+    def _cnn_key(self, job: dict) -> str:
+        spec = {k: v for k, v in job["spec"].items() if k not in ("profiles", "labels")}
+        return settings_key(self.cnn_key, job["name"], spec)
 
     def cnn(self, job: dict) -> dict:
         return self.cache.run(f"cnn_{job['name']}", self._cnn_key(job), lambda: _jsonable(jobs.train_and_test(job)))
 
-    def _cnn_key(self, job: dict) -> str:
-        return settings_key(self.cnn_key, job["name"], job.get("sigma_p"))
+    @staticmethod
+    def best_strategy(strategies: dict, on: str) -> dict:
+        """The strategy whose CNN has the best balanced accuracy on the selection set."""
+        scores = {n: s["tests"][on]["balanced_accuracy"] for n, s in strategies.items() if on in s["tests"]}
+        if not scores:
+            return {"name": None, "set": on, "scores": {}}
+        best = max(scores, key=lambda n: scores[n])
+        return {"name": best, "set": on, "scores": scores}
 
-    def profiles_figure(self, sigma: dict[str, float], tests: dict, calib: dict) -> str:
-        """Measured (new-drone) profiles beside the sigma_P and posterior training sets."""
-        from ..generator import SigmaPAugmenter
-        from ..inference import PosteriorAugmenter
+    # ---- figures -------------------------------------------------------------------------------
+    def profiles_figure(self, specs: dict, choice: dict, tests: dict) -> str:
+        """Measured (new-drone) profiles beside each model-based strategy's profiles."""
         from .figures import measured_vs_synthetic
 
         def compute():
             X, y = tests["new"] if "new" in tests else next(iter(tests.values()))
-            n, seed, matched = 400, _seed(self.cfg, "figure"), self.nuisance("matched")
-            sp, sm = sigma["published"], sigma["matched"]
-            synthetic = {
-                f"sigma_P={sp} (published nuisance)": {
-                    c: SigmaPAugmenter(c, sp, random_state=seed).sample(n).profiles for c in self.cfg.classes},
-                f"sigma_P={sm} (matched nuisance)": {
-                    c: SigmaPAugmenter(c, sm, nuisance=matched, random_state=seed).sample(n).profiles
-                    for c in self.cfg.classes},
-                "posterior (matched nuisance)": {
-                    c: PosteriorAugmenter(calib[c]["posterior"], label=c, nuisance=matched,
-                                          random_state=seed).sample(n).profiles for c in self.cfg.classes},
-            }
+            synthetic = {}
+            for name, ss in specs.items():
+                param = PARAMETER[name]
+                if name == "tsaug":
+                    continue
+                spec = ss[0] if param is None else next(s for s in ss if s[param] == choice[name]["value"])
+                Xs, ys, _ = jobs.training_set(spec, list(self.cfg.classes), 300 if not self.cfg.quick else 60,
+                                              _stage_seed(self.cfg, "figure", name))
+                synthetic[_label(name, spec)] = {c: Xs[ys == c] for c in self.cfg.classes}
             path = self.out / "figures" / "profiles.png"
             measured_vs_synthetic({c: X[y == c] for c in self.cfg.classes}, synthetic, path,
                                   self.cfg.protocol.normalisation)
             return str(path)
-        return self.cache.run("profiles_figure", settings_key(self.calib_key, sorted(sigma.items()),
-                                                              self.cfg.protocol.acquisition_ramps), compute)
+        return self.cache.run("profiles_figure", settings_key(self.cnn_key, sorted(
+            (k, v.get("value")) for k, v in choice.items())), compute)
 
-    # ---- stage 6: separability ceiling -----------------------------------------------
-    def ceiling(self, tests: dict) -> dict:
+    # ---- stage 6: separability ceiling --------------------------------------------------------------
+    def ceiling(self, tests: dict, select) -> dict:
         from ..classify import evaluate, make_classifier
-        from ..generator.scene import simulate_campaign
+        from ..generator.chain_path import render_through_chain
+        from ..generator.scene import SceneConfig, draw_specimens
+        from ..generator import load_reference
 
         sim, p = self.cfg.simulation, self.cfg.protocol
 
         def compute():
-            parts = [simulate_campaign(c, 2 * sim.new_specimens, sim.ceiling_per_class, _seed(self.cfg, "ceiling", c))
-                     for c in self.cfg.classes]
-            X = np.concatenate([c.profiles for c in parts])
-            y = np.concatenate([c.labels for c in parts])
-            result = {"n_train": int(len(y)), "models": {}}
+            scene = SceneConfig(n_ramps=sim.ramps)
+            parts, labels = [], []
+            for c in self.cfg.classes:
+                rng = np.random.default_rng(_stage_seed(self.cfg, "ceiling", c))
+                specimens = draw_specimens(load_reference(c).to_array(), 2 * sim.new_specimens, scene, rng)
+                x = specimens[np.arange(sim.ceiling_per_class) % len(specimens)]
+                parts.append(render_through_chain(x, scene, random_state=_stage_seed(self.cfg, "ceiling-chain", c)).profiles)
+                labels.append(np.full(sim.ceiling_per_class, c))
+            X, y = np.concatenate(parts), np.concatenate(labels)
+            sel_name, sel_data, _ = select
+            result = {"n_train": int(len(y)), "models": {}, "what": "trained on the scene simulator's own data "
+                      f"({sim.ceiling_per_class} acquisitions per class of {2 * sim.new_specimens} other specimens, "
+                      "through the chain's reduced computation)"}
             for model in ("svm", "xgb", "nb"):
-                clf = make_classifier(model, random_state=_seed(self.cfg, "ceiling", model))
+                clf = make_classifier(model, random_state=_stage_seed(self.cfg, "ceiling", model))
                 t0 = time.perf_counter()
                 clf.fit(X, y)
                 result["models"][model] = {
                     "train_seconds": time.perf_counter() - t0,
                     "tests": {n: evaluate(yt, clf.predict(Xt), labels=sorted(self.cfg.classes), n_boot=p.n_boot,
-                                          random_state=0) for n, (Xt, yt) in tests.items()
-                              if not n.startswith("old") and n != "mix"}}
+                                          random_state=0) for n, (Xt, yt) in {sel_name: sel_data, **tests}.items()}}
             return result
-        return self.cache.run("ceiling", settings_key(self.key, self.cfg.protocol.n_boot), compute)
+        return self.cache.run("ceiling", settings_key(self.key, p.n_boot, sim.ceiling_per_class), compute)
 
-    # ---- stage 7: generator speed against error --------------------------------------
-    def speed(self) -> dict:
-        from ..generator import SigmaPAugmenter, profiles
+    # ---- stage 7: speed against error -----------------------------------------------------------------
+    def speed(self, acquisition) -> dict:
+        from .speed import stage_speed
 
-        def compute():
-            x = SigmaPAugmenter("QUAD", 0.2, random_state=0).sample_params(4000 if not self.cfg.quick else 1000)
-            rows, ref = [], None
-            for dtype in ("float64", "float32"):
-                t0 = time.perf_counter()
-                prof = profiles(x, dtype=dtype)
-                sec = time.perf_counter() - t0
-                ref = prof if ref is None else ref
-                rows.append({"stage": "generator", "setting": f"f(x) QUAD {dtype}", "seconds": sec,
-                             "rate_per_s": len(x) / sec, "error": float(np.max(np.abs(prof - ref))),
-                             "error_metric": "max |profile - float64|"})
-            return {"rows": rows}
-        return self.cache.run("speed", settings_key(self.cfg.quick), compute)
+        return self.cache.run("speed", settings_key(self.cfg.quick, acquisition.to_dict()),
+                              lambda: stage_speed(acquisition, quick=self.cfg.quick))
 
-    # ---- the whole study -------------------------------------------------------------
+    # ---- the whole study ----------------------------------------------------------------------------------
     def run(self) -> dict:
         t_start = time.perf_counter()
         executor = make_executor(self.cfg.workers, self.cfg.scheduler)
         try:
             index = self.data()
+            acq = self.acquisition(index)
+            self.log(f"acquisition: {acq.describe()}")
             tests = self.test_sets(index)
-            calib = {c: self.calibrate(c) for c in self.cfg.classes}
-            sweeps = {n: self.sweep(n, tests, executor) for n in self.cfg.protocol.nuisances}
-            peek_set = "new" if "new" in tests else next(iter(tests))
-            honest_set = "old" if "old" in tests else peek_set
-            by_nuisance = {n: {"published_peeking": self.choose_sigma(sw["rows"], peek_set),
-                               "non_peeking": self.choose_sigma(sw["rows"], honest_set)} for n, sw in sweeps.items()}
-            choice = {**by_nuisance.get("published", next(iter(by_nuisance.values()))), "by_nuisance": by_nuisance}
-            for n, c in by_nuisance.items():
-                self.log(f"sigma_P [{n}]: {c['non_peeking']['sigma_p']} non-peeking (on '{honest_set}'), "
-                         f"{c['published_peeking']['sigma_p']} the published way (peeks at '{peek_set}')")
-            sigma = {n: by_nuisance.get(n, choice)["non_peeking"]["sigma_p"]
-                     for n in set(STRATEGY_NUISANCE.values()) - {None}}
-            cnn_jobs = self.cnn_jobs(sigma, tests, calib)
+            select = self.selection_set(index)
+            calib = {c: self.calibrate(c, acq) for c in self.cfg.classes}
+            tsaug_src = [self.load_set(f"calibration_{c}") for c in self.cfg.classes]
+            specs = self.specs(calib, (np.concatenate([s[0] for s in tsaug_src]),
+                                       np.concatenate([s[1] for s in tsaug_src])))
+            cand = self.candidates(specs, select, tests, executor)
+            sel_name = select[0]
+            peek = "new" if "new" in tests else next(iter(tests))
+            choice = {n: self.choose(cand["rows"], n, sel_name) for n in specs if PARAMETER[n] is not None}
+            published_peeking = self.choose(cand["rows"], "sigma_p_published", peek) \
+                if "sigma_p_published" in specs else None
+            for n, c in choice.items():
+                self.log(f"choice [{n}]: {c['parameter']} = {c['value']} (on '{sel_name}')")
+            cnn_jobs = self.cnn_jobs(specs, choice, select, tests)
             todo = [j for j in cnn_jobs if not self.cache.has(f"cnn_{j['name']}", self._cnn_key(j))]
             if len(todo) > 1 and self.cfg.workers > 1:
                 for job, res in zip(todo, executor.map(jobs.train_and_test, todo)):
                     self.cache.store(f"cnn_{job['name']}", self._cnn_key(job), _jsonable(res),
                                      res["data_seconds"] + res["train_seconds"])
             strategies = {j["name"]: self.cnn(j) for j in cnn_jobs}
-            figure = self.profiles_figure(sigma, tests, calib)
-            ceiling = self.ceiling(tests) if self.cfg.simulated else None
-            speed = self.speed()
+            best = self.best_strategy(strategies, sel_name)
+            figure = self.profiles_figure(specs, choice, tests)
+            ceiling = self.ceiling(tests, select) if self.cfg.simulated else None
+            speed = self.speed(acq)
         finally:
             executor.close()
         results = {
-            "config": self.cfg.to_dict(), "simulated": self.cfg.simulated, "data": index,
-            "calibration": calib, "sweeps": sweeps, "sigma_p_choice": choice, "strategies": strategies,
-            "ceiling": ceiling, "speed": speed, "profiles_figure": figure, "timings": dict(self.cache.timings),
-            "resumed_stages": list(self.cache.resumed), "total_seconds": time.perf_counter() - t_start,
+            "config": self.cfg.to_dict(), "simulated": self.cfg.simulated,
+            "data": index["sets"], "acquisition": index["acquisition"], "acquisition_text": acq.describe(),
+            "selection": {"set": sel_name, "what": select[2]},
+            "calibration": calib, "candidates": cand, "choice": choice, "published_peeking_choice": published_peeking,
+            "strategies": strategies, "strategy_text": {n: STRATEGY_TEXT[n] for n in strategies},
+            "best_strategy": best, "ceiling": ceiling, "speed": speed, "profiles_figure": figure,
+            "timings": dict(self.cache.timings), "resumed_stages": list(self.cache.resumed),
+            "total_seconds": time.perf_counter() - t_start,
         }
         text = json.dumps(_jsonable(results), indent=1)
         atomic_write(self.out / "results.json", lambda fh: fh.write(text.encode()))
@@ -350,6 +437,27 @@ class Study:
 
         write_report(results, self.out / "report.html")
         return results
+
+
+def stage_names(cfg: StudyConfig) -> list[str]:
+    """The stages a study of ``cfg`` runs, in order."""
+    names = ["data", *(f"calibrate_{c}" for c in cfg.classes), "candidates",
+             *(f"cnn_{s}" for s in cfg.protocol.strategies), "profiles_figure"]
+    return names + (["ceiling"] if cfg.simulated else []) + ["speed"]
+
+
+def _label(name: str, spec: dict) -> str:
+    param = PARAMETER[name]
+    return name + ("" if param is None else f" ({param} {spec[param]:g})")
+
+
+def _imap(executor, fn, items):
+    """Results of fn over items in order: one at a time serially (so a progress bar
+    moves), or the executor's map."""
+    if executor.name == "serial":
+        return (fn(item) for item in items)
+    return executor.map(fn, items)
+
 
 def _jsonable(obj):
     """Plain Python types for JSON (numpy scalars and arrays converted)."""

@@ -69,7 +69,8 @@ def test_option_choices_match_the_library():
     from mdaug.generator.scene import SCENE_PHASES
     from mdaug.radar import NORMALISATIONS
 
-    assert common.NUISANCE_PHASES == PHASE_TREATMENTS and common.SIGN_POLICIES == SIGN_POLICIES
+    assert common.ACQUISITION_PHASES == PHASE_TREATMENTS and common.SIGN_POLICIES == SIGN_POLICIES
+    assert set(common.NUISANCE_PHASES) == {"relative", *PHASE_TREATMENTS}
     assert common.NORMALISATIONS == NORMALISATIONS and data.SCENE_PHASES == SCENE_PHASES
 
 
@@ -202,7 +203,8 @@ def test_cnn_shows_epochs_and_validation_accuracy_on_a_terminal(monkeypatch):
 
 def test_sweep_shows_its_cells_and_the_study_its_stages(monkeypatch, tmp_path):
     from mdaug.classify import sigma_p_sweep
-    from mdaug.cli.study import StageProgress, stage_names
+    from mdaug.cli.study import StageProgress
+    from mdaug.reports.study import stage_names
     from mdaug.reports.cache import StageCache
     from mdaug.reports.config import StudyConfig
 
@@ -233,10 +235,12 @@ def test_sweep_shows_its_cells_and_the_study_its_stages(monkeypatch, tmp_path):
 def test_run_summary_is_a_table_without_python_dicts():
     from mdaug.cli.study import summary
 
-    m = {"accuracy": 0.75, "balanced_accuracy": 0.7, "n": 136, "ci": {"accuracy": [0.68, 0.82]},
+    m = {"accuracy": 0.75, "balanced_accuracy": 0.7, "n": 136, "ci": {"balanced_accuracy": [0.68, 0.82]},
          "per_class": {"HELI": {"recall": 0.5}, "QUAD": {"recall": 0.9}}}
     results = {"config": {"classes": ["HELI", "QUAD"]},
-               "strategies": {"sigma_p": {"sigma_p": 0.2, "tests": {"old": m, "new": m}},
+               "selection": {"set": "select", "what": "held-out acquisitions"},
+               "best_strategy": {"name": "sigma_p_fit"},
+               "strategies": {"sigma_p_fit": {"sigma_p": 0.2, "tests": {"select": m, "new": m}},
                               "tsaug": {"sigma_p": None, "tests": {"new": m}}},
                "ceiling": {"models": {"xgb": {"tests": {"new": m}}}},
                "calibration": {"HELI": {"converged": False, "diagnostics": {"reason": "NOT CONVERGED: budget"}},
@@ -244,10 +248,10 @@ def test_run_summary_is_a_table_without_python_dicts():
     text = summary(results)
     assert "{" not in text and "}" not in text
     lines = text.splitlines()
-    assert lines[0].split() == ["strategy", "test", "n", "accuracy", "95%", "CI", "balanced", "recall", "HELI",
+    assert lines[0].split() == ["strategy", "test", "n", "balanced", "acc.", "95%", "CI", "recall", "HELI",
                                 "recall", "QUAD"]
-    assert re.match(r"^CNN sigma_p \(sigma_P 0.2\)\s+new\s+136\s+0.750\s+\[0.680, 0.820\]\s+0.700\s+0.50\s+0.90$",
-                    lines[2])
+    assert re.match(r"^CNN sigma_p_fit \(sigma_p 0.2\) \*\s+new\s+136\s+0.700\s+\[0.680, 0.820\]\s+0.50\s+0.90$",
+                    lines[2]), lines[2]
     assert any(line.startswith("ceiling xgb") for line in lines)
     assert "calibration HELI: NOT converged (NOT CONVERGED: budget)" in text
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from mdaug.generator import (IDX, N_PARAMS, ClassParams, FixedParamsAugmenter, Nuisance, SigmaPAugmenter,
+from mdaug.generator import (IDX, N_PARAMS, Acquisition, ClassParams, FixedParamsAugmenter, SigmaPAugmenter,
                              load_reference, profiles, spectra, validate_vectors)
 from mdaug.generator.params import NONNEGATIVE, PHASES
 from mdaug.radar import NORMALISATIONS, RadarConfig
@@ -70,8 +70,10 @@ def test_sign_policies():
 
 
 def test_uniform_phases_are_uniform_on_the_circle():
-    aug = SigmaPAugmenter(HELI, 0.1, nuisance=Nuisance(phases="uniform"), random_state=11)
-    x = aug.sample_params(5000)
+    from mdaug.generator.acquisition import draw_acquisitions
+
+    x = draw_acquisitions(np.repeat(HELI.to_array()[None], 5000, 0), Acquisition(phases="uniform"),
+                          np.random.default_rng(11)).x
     for c in PHASES:
         ks = stats.kstest(x[:, c], stats.uniform(loc=-np.pi, scale=2 * np.pi).cdf)
         assert ks.pvalue > 1e-3, (c, ks)
@@ -81,7 +83,7 @@ def test_uniform_phases_are_uniform_on_the_circle():
 
 
 def test_fixed_phases_are_untouched():
-    x = SigmaPAugmenter(QUAD, 0.3, nuisance=Nuisance(phases="fixed"), random_state=1).sample_params(10)
+    x = SigmaPAugmenter(QUAD, 0.3, perturb_phases=False, random_state=1).sample_params(10)
     cols = [k * N_PARAMS + c for k in range(4) for c in PHASES]
     np.testing.assert_array_equal(x[:, cols], np.broadcast_to(QUAD.to_array()[cols], (10, len(cols))))
 
@@ -89,8 +91,11 @@ def test_fixed_phases_are_untouched():
 def test_ramp_average_converges_to_the_phase_averaged_profile():
     """K ramps (phases advancing by w x 2.88 ms) -> the average over uniform phases."""
     radar = RadarConfig()
-    uniform = SigmaPAugmenter(HELI, 0.0, nuisance=Nuisance(phases="uniform"), random_state=0)
-    reference = spectra(uniform.sample_params(6000), radar).mean(axis=0)
+    from mdaug.generator.acquisition import draw_acquisitions
+
+    uniform = draw_acquisitions(np.repeat(HELI.to_array()[None], 6000, 0), Acquisition(phases="uniform"),
+                                np.random.default_rng(0)).x
+    reference = spectra(uniform, radar).mean(axis=0)
     errors = {}
     for k in (1, 16, 400):
         got = spectra(HELI.to_array(), radar, n_ramps=k)[0]
@@ -101,17 +106,20 @@ def test_ramp_average_converges_to_the_phase_averaged_profile():
 
 def test_range_jitter_moves_the_tone_within_the_requested_width():
     radar = RadarConfig()
-    aug = SigmaPAugmenter(HELI, 0.0, nuisance=Nuisance(range_jitter_bins=1.0), random_state=4)
-    r0 = aug.sample_r0(4000, np.random.default_rng(1))
+    from mdaug.generator.acquisition import draw_acquisitions
+
+    r0 = draw_acquisitions(np.repeat(HELI.to_array()[None], 4000, 0), Acquisition(range_jitter_bins=1.0),
+                           np.random.default_rng(1)).r0
     offset_bins = (r0 - radar.model_range_m) / radar.model_range_per_bin()
     assert offset_bins.min() >= -0.5 and offset_bins.max() <= 0.5
     assert stats.kstest(offset_bins, stats.uniform(loc=-0.5, scale=1).cdf).pvalue > 1e-3
 
 
-def test_same_seed_same_bytes_and_batch_size_does_not_matter():
-    kw = dict(nuisance=Nuisance(phases="uniform", range_jitter_bins=1.0, n_ramps=2))
-    a = SigmaPAugmenter(QUAD, 0.2, random_state=7, **kw).sample(300, batch_size=64)
-    b = SigmaPAugmenter(QUAD, 0.2, random_state=7, **kw).sample(300, batch_size=1000)
+def test_same_seed_same_bytes():
+    kw = dict(acquisition=Acquisition(phases="uniform", range_jitter_bins=1.0, ramps=2, carrier=(0, 0.3),
+                                      noise_db=(-50, -40), mti_depth=10, yaw_deg=10.0))
+    a = SigmaPAugmenter(QUAD, 0.2, random_state=7, **kw).sample(300)
+    b = SigmaPAugmenter(QUAD, 0.2, random_state=7, **kw).sample(300)
     c = SigmaPAugmenter(QUAD, 0.2, random_state=8, **kw).sample(300)
     assert a.profiles.tobytes() == b.profiles.tobytes() and a.params.tobytes() == b.params.tobytes()
     assert a.profiles.tobytes() != c.profiles.tobytes()
@@ -178,13 +186,13 @@ def test_bad_vectors_are_named(bad, match):
 
 
 @pytest.mark.parametrize("kw, match", [
-    (dict(reference="FOO"), "unknown class 'FOO'"),
+    (dict(centre="FOO"), "unknown class 'FOO'"),
     (dict(sigma_p=-0.1), "sigma_p must be a number in \\[0, 1\\]"),
     (dict(sigma_p=1.5), "sigma_p must be a number in \\[0, 1\\]"),
     (dict(sign_policy="wrap"), "sign_policy must be one of"),
 ])
 def test_bad_augmenter_settings(kw, match):
-    args = {"reference": "HELI", **kw}
+    args = {"centre": "HELI", **kw}
     with pytest.raises(ValueError, match=match):
         SigmaPAugmenter(**args)
 
@@ -195,10 +203,14 @@ def test_bad_sample_count(n):
         SigmaPAugmenter("HELI", 0.1).sample(n)
 
 
-def test_bad_nuisance():
+def test_bad_acquisition():
     with pytest.raises(ValueError, match="phases must be one of"):
-        Nuisance(phases="random")
-    with pytest.raises(ValueError, match="n_ramps"):
-        Nuisance(n_ramps=0)
+        Acquisition(phases="random")
+    with pytest.raises(ValueError, match="ramps"):
+        Acquisition(ramps=0)
     with pytest.raises(ValueError, match="range_jitter_bins"):
-        Nuisance(range_jitter_bins=-1)
+        Acquisition(range_jitter_bins=-1)
+    with pytest.raises(ValueError, match="carrier"):
+        Acquisition(carrier=(0.3, 0.1))
+    with pytest.raises(ValueError, match="mti_depth"):
+        Acquisition(mti_depth=-1)

@@ -101,7 +101,8 @@ def heli_profile():
 
 def test_mode_finder_polishes_to_optima_and_keeps_its_state(heli_profile):
     from mdaug.inference.likelihood import prepare_measured
-    from mdaug.inference.priors import Layout, Priors
+    from mdaug.inference.layout import Layout
+    from mdaug.inference.priors import Priors
     from mdaug.radar import RadarConfig
 
     heli = load_reference("HELI")

@@ -32,7 +32,7 @@ def test_quick_study_writes_results_that_match_its_report(quick_study):
     for sid in SECTIONS:
         assert f'<section id="{sid}">' in page, sid
     cells = re.findall(r'data-key="([^"]+)">([^<\s]+)', page)
-    assert len(cells) > 60
+    assert len(cells) > 40
     for key, shown in cells:
         value = lookup(results, key)
         if shown == "–":
@@ -40,30 +40,36 @@ def test_quick_study_writes_results_that_match_its_report(quick_study):
         else:
             decimals = len(shown.split(".")[1]) if "." in shown else 0
             assert float(shown) == pytest.approx(float(value), abs=0.51 * 10.0 ** -decimals), key
-    assert page.count("data:image/png;base64,") >= 8 and 'src="http' not in page
+    assert page.count("data:image/png;base64,") >= 3 and 'src="http' not in page
     assert "simulated" in page
 
 
 def test_quick_study_compares_every_strategy_with_intervals(quick_study):
+    from mdaug.reports.config import STRATEGIES
+    from mdaug.reports.study import PARAMETER
+
     results = json.loads((quick_study / "results.json").read_text())
-    assert set(results["strategies"]) == {"sigma_p", "sigma_p_matched", "posterior", "tsaug"}
+    assert set(results["strategies"]) == set(STRATEGIES)
+    assert results["selection"]["set"] == "select"
     for name, s in results["strategies"].items():
         m = s["tests"]["new"]
-        assert 0 <= m["accuracy"] <= 1 and m["n"] == sum(results["data"]["new"]["per_class"].values())
-        lo, hi = m["ci"]["accuracy"]
-        assert lo <= m["accuracy"] <= hi
+        assert 0 <= m["balanced_accuracy"] <= 1 and m["n"] == results["data"]["new"]["n"]
+        lo, hi = m["ci"]["balanced_accuracy"]
+        assert lo <= m["balanced_accuracy"] <= hi
         assert set(m["per_class"]) == {"HELI", "QUAD"}
-    for nuisance in results["config"]["protocol"]["nuisances"]:
-        rows = results["sweeps"][nuisance]["rows"]
-        assert {r["sigma_p"] for r in rows} == set(results["config"]["protocol"]["sigma_p"])
-    assert results["sigma_p_choice"]["non_peeking"]["test_set"] == "old"
-    assert results["sigma_p_choice"]["published_peeking"]["test_set"] == "new"
-    by = results["sigma_p_choice"]["by_nuisance"]
-    assert set(by) == set(results["config"]["protocol"]["nuisances"])
-    # each model-based CNN trained at its own nuisance treatment's non-peeking choice
-    assert results["strategies"]["sigma_p_matched"]["sigma_p"] == by["matched"]["non_peeking"]["sigma_p"]
+        assert "select" in s["tests"]  # every strategy is scored on the selection set too
+        param = PARAMETER[name]
+        if param is not None:  # each CNN trained at its strategy's choice, made on the selection set only
+            assert s[param] == results["choice"][name]["value"] and results["choice"][name]["set"] == "select"
+    rows = results["candidates"]["rows"]
+    assert {r["value"] for r in rows if r["strategy"] == "sigma_p_fit"} == set(results["config"]["protocol"]["sigma_p"])
+    assert results["published_peeking_choice"]["set"] == "new"
+    assert results["best_strategy"]["set"] == "select" and results["best_strategy"]["name"] in results["strategies"]
     assert {"data", "calibrate_HELI", "calibrate_QUAD", "cnn_posterior"} <= set(results["timings"])
     assert results["ceiling"]["models"]["xgb"]["tests"]["new"]["accuracy"] >= 0
+    assert results["acquisition"]["ramps"] == results["config"]["simulation"]["ramps"]
+    for cls in ("HELI", "QUAD"):
+        assert results["calibration"][cls]["acquisition"]["ramps"] == results["acquisition"]["ramps"]
 
 
 def test_rerun_resumes_from_cached_stages(quick_study, tmp_path):
@@ -75,7 +81,7 @@ def test_rerun_resumes_from_cached_stages(quick_study, tmp_path):
     first = json.loads((quick_study / "results.json").read_text())
     second = json.loads((out / "results.json").read_text())
     assert "cnn_tsaug" not in second["resumed_stages"]
-    assert {"data", "calibrate_HELI", "sweep_published", "cnn_sigma_p"} <= set(second["resumed_stages"])
+    assert {"data", "calibrate_HELI", "candidates", "cnn_sigma_p_fit"} <= set(second["resumed_stages"])
     # recomputed with the same seed: the same metrics (timings aside)
     def metrics(r):
         return {t: {k: v for k, v in m.items() if not k.endswith("seconds")}
@@ -94,14 +100,14 @@ def test_interrupted_run_resumes_and_user_files_run_the_same_study(quick_study, 
         shutil.copy(data / f"calibration_{cls}.npz", tmp_path / f"cal_{cls}.npz")
     with np.load(data / "new.npz") as f:
         savemat(tmp_path / "new.mat", {"profiles": f["profiles"], "labels": f["labels"]})
-    with np.load(data / "old.npz") as f, open(tmp_path / "old.csv", "w", newline="") as fh:
+    with np.load(data / "select.npz") as f, open(tmp_path / "select.csv", "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow([f"b{i}" for i in range(f["profiles"].shape[1])] + ["label"])
         for row, lab in zip(f["profiles"], f["labels"]):
             w.writerow([*row, lab])
     (tmp_path / "study.toml").write_text(
         'seed = 4\n[data]\ncalibration = { HELI = "cal_HELI.npz", QUAD = "cal_QUAD.npz" }\n'
-        'test = { old = "old.csv", new = "new.mat" }\n')
+        'select = { HELI = "select.csv", QUAD = "select.csv" }\ntest = { new = "new.mat" }\n')
     out = tmp_path / "out"
 
     def interrupt(*_a, **_k):
@@ -115,6 +121,7 @@ def test_interrupted_run_resumes_and_user_files_run_the_same_study(quick_study, 
     results = json.loads((out / "results.json").read_text())
     assert {"data", "calibrate_HELI", "calibrate_QUAD", "cnn_tsaug"} <= set(results["resumed_stages"])
     assert results["simulated"] is False and results["ceiling"] is None
+    assert results["acquisition"]["ramps"] == 4  # as the calibration files say (ramps_per_frame)
     assert results["data"]["new"]["n"] == json.loads((quick_study / "results.json").read_text())["data"]["new"]["n"]
 
 
@@ -129,7 +136,7 @@ def test_changing_the_cnn_keeps_calibration_and_sweeps(quick_study, tmp_path):
     cfg.protocol = dataclasses.replace(cfg.protocol, cnn_epochs=cfg.protocol.cnn_epochs + 1)
     results = Study(cfg, out, log=lambda *_: None).run()
     resumed = set(results["resumed_stages"])
-    assert {"data", "calibrate_HELI", "calibrate_QUAD", "sweep_published", "ceiling"} <= resumed
+    assert {"data", "calibrate_HELI", "calibrate_QUAD", "candidates", "ceiling"} <= resumed
     assert not {f"cnn_{s}" for s in results["strategies"]} & resumed
 
 
@@ -145,5 +152,5 @@ def test_worker_processes_give_the_serial_results(quick_study, tmp_path):
                 for name, s in r["strategies"].items()}
 
     assert metrics(parallel) == metrics(serial)
-    assert [row["accuracy"] for row in parallel["sweeps"]["published"]["rows"]] == \
-        [row["accuracy"] for row in serial["sweeps"]["published"]["rows"]]
+    assert [row["balanced_accuracy"] for row in parallel["candidates"]["rows"]] == \
+        [row["balanced_accuracy"] for row in serial["candidates"]["rows"]]

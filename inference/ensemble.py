@@ -1,0 +1,363 @@
+"""The emcee plugin of :mod:`.samplers`: ensemble MCMC from the fit, resumable
+through emcee's HDF5 backend.
+
+* Walkers start around the best fit with per-coordinate spreads from the local
+  curvature of log p (:func:`curvature_scales`, x ``init_ball``): tight where the
+  data pin a parameter, wide (up to 0.3 prior widths) where they do not.
+* Moves: differential evolution (``DEMove``, three step scales) taken modulo 2 pi
+  on the phases, so phases live on the circle without boundaries, and (a share
+  ``settings.relabel``) the line relabelling of :meth:`.priors.Layout.random_relabel`,
+  an exact symmetry no translation crosses (:func:`make_moves`).
+* The chain runs in blocks of ``check_every`` steps (aligned to absolute step
+  numbers, so a resumed run checks at the same steps as an uninterrupted one);
+  after each block the integrated autocorrelation time tau of every coordinate is
+  estimated (emcee.autocorr) and the run stops when the chain is at least
+  ``min_tau_multiple`` x max tau long and tau moved by less than ``tau_rtol``.
+  Otherwise it stops when the time budget (``settings.time_budget`` seconds) or
+  the optional step cap ``max_steps`` ends, and is flagged not converged.
+* Progress: one bar for the run (steps against the 50 tau target, which is
+  re-estimated at every check, so its ETA sharpens as tau settles).
+* Resume: every step is written to the HDF5 file together with emcee's random
+  state (a legacy ``RandomState``); on restart emcee reads both back, so an
+  interrupted run continues to exactly the chain an uninterrupted one would give.
+  The file also records a fingerprint of the problem; resuming a different
+  problem is refused.
+* Memory: every ``store_every``-th step is kept (auto: the chain stays under
+  ~160 MB; HELI keeps every step, QUAD about every 14th); tau, burn-in and
+  thinning are still counted in steps.
+* Walkers are not independent chains: ESS per coordinate is
+  n_walkers x (steps after burn-in) / tau, not arviz's R-hat/ESS over walkers.
+"""
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import io
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .priors import wrap
+from .samplers import CalibrationInterrupted, SamplerRun, stop_on_sigint
+
+GROUP = "mcmc"
+DE_MIX = ((0.25, 0.5), (1.0, 0.4), (None, 0.1))  # (factor of the standard gamma or None = 1.0, weight)
+
+
+MAX_STORED_FLOATS = 2e7  # chain kept in memory / on disk: ~160 MB of float64
+
+
+AUTO_MAX_STEPS = 100_000  # steps the automatic storage interval plans for when no step cap is set
+
+
+def store_interval(settings, n_walkers: int, dim: int) -> int:
+    """Steps per stored step: ``settings.store_every`` or, when 0, the smallest k that
+    keeps (max_steps or AUTO_MAX_STEPS) / k x walkers x dim under MAX_STORED_FLOATS."""
+    if settings.store_every:
+        return int(settings.store_every)
+    steps = settings.max_steps or AUTO_MAX_STEPS
+    return max(1, int(np.ceil(steps * n_walkers * dim / MAX_STORED_FLOATS)))
+
+
+def fingerprint(*arrays, text: str = "") -> str:
+    h = hashlib.sha256(text.encode())
+    for a in arrays:
+        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    return h.hexdigest()[:32]
+
+
+def estimate_tau(chain: np.ndarray, phase_cols=(), discard: float = 1 / 3) -> np.ndarray:
+    """Integrated autocorrelation time per coordinate (emcee's estimator, c=5), in steps.
+
+    The first ``discard`` of the chain (the expansion from the start ball) is left
+    out. Phases are measured through cos and sin (the larger tau of the two), so a
+    wrap at +-pi is not mistaken for a jump.
+    """
+    import emcee
+
+    chain = chain[int(discard * chain.shape[0]):]
+    cols = np.asarray(phase_cols, dtype=int)
+    if cols.size:
+        ang = chain[..., cols]
+        chain = np.concatenate([chain, np.cos(ang), np.sin(ang)], axis=2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tau = emcee.autocorr.integrated_time(chain, c=5, tol=0, quiet=True)
+    # a coordinate some walker never moved in has no estimate: count it as the whole chain
+    tau = np.where(np.isfinite(tau), tau, chain.shape[0])
+    d = chain.shape[2] - 2 * cols.size
+    if cols.size:
+        tau_c, tau_s = tau[d: d + cols.size], tau[d + cols.size:]
+        tau = tau[:d].copy()
+        tau[cols] = np.maximum(tau_c, tau_s)
+    return tau
+
+
+def make_moves(phase_cols, dim: int, relabel=None, p_relabel: float = 0.0):
+    """Differential-evolution moves whose proposals are wrapped on the phase columns.
+
+    A DE proposal is a translation x + gamma (x_j - x_k) + noise whose law is symmetric
+    under sign change, so taking it modulo 2 pi on the circle keeps it a symmetric
+    proposal on the torus (detailed balance holds). The snooker move is not a
+    translation and is not used.
+
+    Mixture (``DE_MIX``): scale 0.25 x the standard 2.38 / sqrt(2 dim) (half the
+    steps: the posterior's ridges are narrow, the standard scale alone accepts ~2%),
+    the standard scale, and gamma = 1 (10%: swaps a walker between the regions
+    occupied by two others, the mode-hopping move of ter Braak 2006).
+    ``relabel`` (coords, random) -> (coords', log |Jacobian|): a random bijection
+    whose inverse is as likely (:meth:`.priors.Layout.random_relabel`), used as an
+    emcee ``MHMove`` for a share ``p_relabel`` of the steps (the DE weights shrink).
+    """
+    import emcee
+
+    cols = np.asarray(phase_cols, dtype=int)
+
+    class WrappedDEMove(emcee.moves.DEMove):
+        def get_proposal(self, s, c, random):
+            q, f = super().get_proposal(s, c, random)
+            if cols.size:
+                q[:, cols] = wrap(q[:, cols])
+            return q, f
+
+    g_default = 2.38 / np.sqrt(2 * dim)
+    share = 1.0 - (p_relabel if relabel is not None else 0.0)
+    moves = [(WrappedDEMove(gamma0=f * g_default if f else 1.0), w * share) for f, w in DE_MIX]
+    if relabel is not None and p_relabel > 0:
+        moves.append((emcee.moves.MHMove(relabel), p_relabel))
+    return moves
+
+
+def curvature_scales(layout, theta_best: np.ndarray, log_post, rel_step: float = 0.01, cap: float = 0.3):
+    """Per-coordinate scales (dim,) of the posterior at theta_best: 1 / sqrt(-d2 log p / d theta_j^2)
+    by central differences (step ``rel_step`` x prior width), clipped to
+    [1e-4, ``cap``] x width. A coordinate the data do not constrain (flat log p) gets
+    ``cap`` x its prior width, so walkers start spread over it instead of in a
+    ball that would take thousands of steps to expand."""
+    lo, hi = layout.theta_bounds()
+    width = hi - lo
+    if not layout.marginal:
+        width[layout.dim_z:] = 2.0  # ln sigma: 2 nats (its prior box is far wider than the data allow)
+    h = rel_step * width
+    pts = np.repeat(theta_best[None], 2 * layout.dim + 1, axis=0)
+    idx = np.arange(layout.dim)
+    pts[1 + idx, idx] += h
+    pts[1 + layout.dim + idx, idx] -= h
+    lp = log_post(pts)
+    plus, minus = lp[1: 1 + layout.dim], lp[1 + layout.dim:]
+    with np.errstate(invalid="ignore"):
+        curv = -(plus - 2 * lp[0] + minus) / h**2
+    one_sided = ~np.isfinite(curv)  # a bound or the ordering constraint on one side
+    side = np.where(np.isfinite(plus), plus, minus)
+    curv[one_sided] = -2 * (side[one_sided] - lp[0]) / h[one_sided] ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.where(np.isfinite(curv) & (curv > 0), 1.0 / np.sqrt(curv), np.inf)
+    return np.clip(scale, 1e-4 * width, cap * width)
+
+
+def initial_ball(layout, theta_best: np.ndarray, log_post, n_walkers: int, scale,
+                 rng: np.random.Generator) -> np.ndarray:
+    """n_walkers points theta_best + scale * N(0, 1) (scale: (dim,) or a fraction of the
+    prior widths), all inside the prior support (reflected at bounds, redrawn when
+    they break the ordering constraints)."""
+    lo, hi = layout.theta_bounds()
+    if np.ndim(scale) == 0:
+        scale = float(scale) * (hi - lo)
+    out = np.empty((0, layout.dim))
+    box = np.ones(layout.dim, bool)
+    box[layout.phase_cols] = False
+    for _ in range(200):
+        th = theta_best + scale * rng.standard_normal((n_walkers, layout.dim))
+        th[:, box] = lo[box] + np.abs(th[:, box] - lo[box])
+        th[:, box] = hi[box] - np.abs(hi[box] - th[:, box])
+        th[:, layout.phase_cols] = wrap(th[:, layout.phase_cols])
+        th = th[np.isfinite(log_post(th))]
+        out = np.concatenate([out, th])[:n_walkers]
+        if len(out) == n_walkers:
+            return out
+    raise ValueError("could not place walkers inside the prior around the best fit "
+                     "(is the best fit on the boundary of the ordering constraint w_a < w_b?)")
+
+
+def _check_backend(path: Path, fp: str, shape) -> int:
+    """Iterations already in the backend at ``path`` (0 when new); refuses a foreign file."""
+    import h5py
+
+    if not path.exists():
+        return 0
+    try:
+        with h5py.File(path, "r") as f:
+            if GROUP not in f:
+                raise ValueError(f"{path}: not an mdaug MCMC backend (no group {GROUP!r}); "
+                                 "delete it or choose another backend path")
+            g = f[GROUP]
+            old = g.attrs.get("mdaug_fingerprint")
+            it = int(g.attrs.get("iteration", 0))
+            if old is not None and str(old) != fp:
+                raise ValueError(f"{path}: holds a chain of a different problem (data, class, engines or "
+                                 "settings differ); delete it or choose another backend path")
+            if it and (int(g.attrs["nwalkers"]), int(g.attrs["ndim"])) != tuple(shape):
+                raise ValueError(f"{path}: chain shape ({g.attrs['nwalkers']}, {g.attrs['ndim']}) walkers x dim, "
+                                 f"expected {tuple(shape)}")
+            return it
+    except OSError as exc:
+        raise ValueError(f"{path}: not a readable HDF5 file ({exc})") from exc
+
+
+def start_walkers(post, fit, settings, n_walkers: int, rng) -> tuple[np.ndarray, int]:
+    """Initial walkers (n_walkers, dim): around the best fit, and with ``init_modes``
+    also around every distinct rival mode the fit found (within RIVAL_MISFIT nats),
+    split evenly, so the ensemble starts on every competitive mode it knows of.
+    Returns (walkers, number of modes started on)."""
+    from .fit import AGREE_DISTANCE, RIVAL_MISFIT
+
+    layout = post.layout
+    lo, hi = layout.z_bounds()
+    width = (hi - lo)[: layout.n_shared]
+    order = np.argsort(fit.starts_misfit)
+    centres = [fit.best_z]
+    if settings.init_modes:
+        for i in order:
+            z = fit.starts_z[i]
+            if fit.starts_misfit[i] - fit.misfit > RIVAL_MISFIT:
+                break
+            if all(np.max(np.abs(z[: layout.n_shared] - c[: layout.n_shared]) / width) > AGREE_DISTANCE
+                   for c in centres):
+                centres.append(z)
+    counts = np.full(len(centres), n_walkers // len(centres))
+    counts[0] += n_walkers - counts.sum()
+    groups = []
+    for v, n in zip(centres, counts):
+        theta = post.theta_from_fit(np.asarray(v)[None])[0]
+        scales = settings.init_ball * curvature_scales(layout, theta, post)
+        groups.append(initial_ball(layout, theta, post, int(n), scales, rng))
+    return np.concatenate(groups), len(centres)
+
+
+class EmceeSampler:
+    """The default sampler: emcee's ensemble (DE moves on the circle + line relabelling),
+    run in blocks of ``check_every`` steps until ``min_tau_multiple`` x max tau or the
+    time budget (module doc). Resumable from its HDF5 checkpoint."""
+
+    name = "emcee"
+
+    def run(self, post, fit, settings, seed_seq, *, backend_path=None, fingerprint: str = "") -> SamplerRun:
+        layout = post.layout
+        ball_ss, mc_ss = seed_seq.spawn(2)
+        n_walkers = max(settings.n_walkers or 3 * layout.dim, 2 * layout.dim + 2, 32)  # DE needs > 2 dim
+        n_walkers += n_walkers % 2
+        p0, n_modes = start_walkers(post, fit, settings, n_walkers, np.random.default_rng(ball_ss))
+        run = run_ensemble(post, p0, settings, seed=int(mc_ss.generate_state(1)[0]), backend_path=backend_path,
+                           fp=fingerprint, phase_cols=layout.phase_cols,
+                           relabel=layout.random_relabel if settings.relabel > 0 else None)
+        run.extra["n_start_modes"] = int(n_modes)
+        return run
+
+
+def _block_end(it: int, check: int, max_steps: int | None) -> int:
+    end = (it // check + 1) * check
+    return end if max_steps is None else min(end, max_steps)
+
+
+def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=None, fp: str = "",
+                 phase_cols=(), relabel=None) -> SamplerRun:
+    """Run (or resume) the ensemble; see the module docstring.
+
+    log_post: vectorised callable theta (W, dim) -> (W,); p0: (W, dim) start (ignored
+    when the backend already holds steps); seed: int for emcee's RandomState;
+    phase_cols: columns that live on the circle (wrapped by the moves); relabel: the
+    exact-symmetry move (``settings.relabel`` of the steps), see :func:`make_moves`.
+    Stops at the first check at or after ``min_tau_multiple`` x max tau with tau
+    stable, when ``time_budget`` seconds have passed (checked at every step), or at
+    ``max_steps`` (None: no step cap). A Ctrl-C stops at the next step with the
+    checkpoint saved and raises :class:`CalibrationInterrupted`.
+    """
+    import emcee
+
+    from ..radar.progress import progress_bar
+
+    t0 = time.perf_counter()
+    n_walkers, dim = p0.shape
+    moves = make_moves(phase_cols, dim, relabel, settings.relabel)
+    backend, resumed_at = None, 0
+    if backend_path is not None:
+        path = Path(backend_path)
+        resumed_at = _check_backend(path, fp, (n_walkers, dim))
+        backend = emcee.backends.HDFBackend(str(path), name=GROUP)
+        if resumed_at == 0:
+            backend.reset(n_walkers, dim)
+        import h5py
+
+        with h5py.File(path, "a") as f:
+            g = f[GROUP]
+            g.attrs["mdaug_fingerprint"] = fp
+            if resumed_at:  # keep the stored interval of the file
+                stored_k = int(g.attrs.get("mdaug_store_every", 1))
+            else:
+                g.attrs["mdaug_store_every"] = stored_k = store_interval(settings, n_walkers, dim)
+    sampler = emcee.EnsembleSampler(n_walkers, dim, log_post, vectorize=True, moves=moves, backend=backend)
+    if resumed_at:
+        state = None  # emcee restores the last walkers, log-probs and random state
+    else:
+        state = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
+    k = stored_k if backend_path is not None else store_interval(settings, n_walkers, dim)
+    check = -(-settings.check_every // k) * k  # block length, a multiple of k steps
+    max_steps = None if settings.max_steps is None else max(k, settings.max_steps // k * k)
+    it = resumed_at * k  # steps done (the backend counts stored steps)
+    tau, converged, reason, out_of_time = np.full(dim, np.inf), False, "", False
+    budget = settings.time_budget
+    target = settings.min_tau_multiple * 20.0  # steps: a first guess, replaced at every check
+    bar = progress_bar(total=int(max(target, check)), initial=min(it, int(max(target, check))),
+                       desc="calibration", unit="step", progress=settings.progress)
+    try:
+        with stop_on_sigint() as flag, contextlib.redirect_stdout(io.StringIO()):
+            while True:
+                if it > 0 and it % check == 0 or (max_steps is not None and it >= max_steps) or out_of_time:
+                    chain = sampler.get_chain()
+                    tau = estimate_tau(chain, phase_cols) * k
+                    long_enough = it >= settings.min_tau_multiple * tau.max()
+                    target = settings.min_tau_multiple * tau.max()
+                    bar.total = int(max(target, it + 1))
+                    bar.set_postfix_str(f"tau {tau.max():.0f}, {it / tau.max():.1f} tau of "
+                                        f"{settings.min_tau_multiple:g}", refresh=True)
+                    if long_enough and it > check:
+                        # tau one block earlier, recomputed (not remembered) so that a resumed
+                        # run takes exactly the decisions of an uninterrupted one
+                        tau_prev = estimate_tau(chain[: (it - check) // k], phase_cols) * k
+                        if np.all(np.abs(tau - tau_prev) <= settings.tau_rtol * tau):
+                            converged = True
+                            reason = f"chain {it} steps >= {settings.min_tau_multiple:g} x max tau {tau.max():.0f}"
+                            break
+                if (max_steps is not None and it >= max_steps) or out_of_time:
+                    ratio = it / tau.max()
+                    what = (f"time budget of {budget:g} s" if out_of_time else f"budget of {max_steps} steps")
+                    reason = (f"NOT CONVERGED: {what} ended at {ratio:.1f} x max tau ({tau.max():.0f} steps; "
+                              f"need {settings.min_tau_multiple:g})")
+                    if ratio >= settings.min_tau_multiple:
+                        reason += f"; tau still changing by more than {settings.tau_rtol:.0%} per block"
+                    elif ratio < 20:
+                        reason += "; tau is a lower bound (its estimate is capped by the chain length)"
+                    break
+                n = _block_end(it, check, max_steps) - it
+                if state is None:  # resumed: emcee's backend holds the last walkers and random state
+                    state = sampler.get_last_sample()
+                for state in sampler.sample(state, iterations=n // k, thin_by=k, skip_initial_state_check=True):
+                    it += k
+                    bar.update(k)
+                    if flag["stop"]:
+                        raise CalibrationInterrupted(f"stopped at step {it}")
+                    if budget is not None and time.perf_counter() - t0 > budget:
+                        out_of_time = True
+                        break
+    except KeyboardInterrupt as exc:
+        where = f"; its {sampler.iteration * k} steps are saved in {backend_path}" if backend_path else ""
+        raise CalibrationInterrupted(f"calibration interrupted{where}") from exc
+    finally:
+        bar.close()
+    chain = sampler.get_chain()
+    burn = min(int(np.ceil(settings.burn_tau * tau.max())), it // 2)
+    thin = max(k, int(settings.thin_tau * tau.min()) // k * k)
+    return SamplerRun(chain=chain, log_prob=sampler.get_log_prob(), tau=tau, burn=burn, thin=thin,
+                      acceptance=np.asarray(sampler.acceptance_fraction, float), converged=converged,
+                      reason=reason, seconds=time.perf_counter() - t0, resumed_at=resumed_at * k,
+                      store_every=k, sampler="emcee")
