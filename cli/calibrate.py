@@ -166,7 +166,7 @@ def add_calibrate(sub, parents, help):
                    help=f"emcee step budget, steps per walker (default: {_cap(d.max_steps)}; --quick: "
                         f"{_cap(q.max_steps)})")
     g.add_argument("--walkers", type=walkers_arg, default=None, metavar="N",
-                   help="emcee walkers (default: 3 x the number of sampled coordinates, at least 32; "
+                   help="emcee walkers (default: 2 x the number of sampled coordinates + 2, at least 32; "
                         f"--quick: {q.n_walkers})")
     g.add_argument("--particles", type=particles_arg, default=None, metavar="N",
                    help="SMC particles (default: max(500, 40 x the number of sampled coordinates))")

@@ -244,7 +244,7 @@ class EmceeSampler:
     def run(self, post, fit, settings, seed_seq, *, backend_path=None, fingerprint: str = "") -> SamplerRun:
         layout = post.layout
         ball_ss, mc_ss = seed_seq.spawn(2)
-        n_walkers = max(settings.n_walkers or 3 * layout.dim, 2 * layout.dim + 2, 32)  # DE needs > 2 dim
+        n_walkers = max(settings.n_walkers or 2 * layout.dim + 2, 2 * layout.dim + 2, 32)  # DE needs > 2 dim
         n_walkers += n_walkers % 2
         p0, n_modes = start_walkers(post, fit, settings, n_walkers, np.random.default_rng(ball_ss))
         run = run_ensemble(post, p0, settings, seed=int(mc_ss.generate_state(1)[0]), backend_path=backend_path,

@@ -18,7 +18,8 @@ class CalibrationSettings:
     algorithm, ``fit_budget`` objective evaluations each, seeded from the run's seed)
     followed by ``local_algorithm`` with ``polish_budget`` evaluations.
 
-    MCMC (emcee): ``n_walkers`` walkers (0 = 3 x dimensions; at least 2 x dim + 2 and 32), run in
+    MCMC (emcee): ``n_walkers`` walkers (0 = 2 x dimensions + 2, the least differential evolution
+    needs, since every walker costs a likelihood evaluation per step; at least 32), run in
     blocks of ``check_every`` steps until the chain is ``min_tau_multiple`` integrated
     autocorrelation times long and tau changed by less than ``tau_rtol`` between
     checks: convergence sets the length. ``time_budget`` (seconds of sampling; None =

@@ -66,7 +66,7 @@ class SimulationConfig:
 
     ramps: int = 32                 # ramps per frame of every simulated acquisition (K)
     n_calibration: int = 5          # acquisitions of the reference specimen per class, calibrated on
-    n_select: int = 12              # more of them per class, held out for the study's choices
+    n_select: int = 24              # more of them per class, held out for the study's choices
     n_new: dict[str, int] = field(default_factory=lambda: {"HELI": 44, "QUAD": 92})
     new_specimens: int = 3          # new drone specimens per class in the test campaign
     large_factor: int = 4           # a second, larger new-drone campaign for tighter intervals
@@ -91,7 +91,7 @@ class ProtocolConfig:
     n_boot: int = 1000
     # calibration: the phases marginalised under the campaign's acquisition; a time budget
     # per class (the run is flagged not converged when it ends first)
-    calibration_time_budget: float = 240.0
+    calibration_time_budget: float = 180.0
     calibration_starts: int = 2
     calibration_fit_budget: int = 1500
     calibration_draws: int = 16

@@ -368,8 +368,9 @@ class Study:
             result = {"n_train": int(len(y)), "models": {}, "what": "trained on the scene simulator's own data "
                       f"({sim.ceiling_per_class} acquisitions per class of {2 * sim.new_specimens} other specimens, "
                       "through the chain's reduced computation)"}
-            for model in ("svm", "xgb", "nb"):
-                clf = make_classifier(model, random_state=_stage_seed(self.cfg, "ceiling", model))
+            for model in ("svm", "xgb", "nb", "cnn"):  # the CNN: like for like with the strategies' CNNs
+                params = {"epochs": p.cnn_epochs, "patience": p.cnn_patience} if model == "cnn" else {}
+                clf = make_classifier(model, random_state=_stage_seed(self.cfg, "ceiling", model), **params)
                 t0 = time.perf_counter()
                 clf.fit(X, y)
                 result["models"][model] = {

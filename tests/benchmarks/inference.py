@@ -1,19 +1,19 @@
 """Speed and error of the calibration (run on demand: python tests/benchmarks/inference.py).
 
 Prints, all with 1 thread:
-1. likelihood throughput, float32 vs float64 f(x) (ratio against float64 in the same run);
-2. fit: nlopt global algorithm x budget -> final misfit (nats above the truth's) and
-   distance to the truth (shared parameters, in prior widths), medians over seeds;
-3. MCMC: chain length -> error of posterior means and 90% interval ends against a
-   long reference chain (in reference posterior sds), and seconds;
-4. a full HELI calibration with the default settings (fit + MCMC to 50 tau or budget);
-5. a QUAD run with a capped budget (time per step, tau so far);
-6. simulation-based calibration: rank-uniformity statistics over many prior draws;
-7. SBC of the default emcee sampler against the opt-in tempered SMC with and
-   without mode jumps (``--sections sbc_compare``, ``--samplers``, ``--sbc-draws``):
-   outer-10% share, chi-square and KS p, p of the truth's log-posterior rank,
-   s/calibration;
-8. a HELI calibration with ``sampler="smc"`` at default settings (time).
+1. fitted-phase likelihood throughput, float32 vs float64 f(x) (ratio in the same run);
+2. fit: nlopt global algorithm x budget on one single-chirp profile (fitted phases);
+3. likelihood: the marginal (synthetic) likelihood's cost per evaluation and its
+   Monte Carlo error against the number of simulated acquisitions O and ramps I
+   (speed against error; error = rms over bins of the model mean's spread across
+   common-random-number seeds, peak = 1);
+4. HELI from 5 scene-simulated acquisitions at K = 32 (and ``--ramps`` K): time to
+   50 tau with min ESS >= 400 (target < 90 s), and the label-free lines' 90%
+   intervals against the truth (recovery);
+5. QUAD from 5 acquisitions at K = 32 with the default time budget (target < 8 min);
+6. simulation-based calibration of the supported case (``--sbc-draws`` truths from
+   the prior, 5 scene-simulated acquisitions each, K = ``--sbc-ramps``): outer-10%
+   share (honest: 0.10), pooled chi-square p, seconds per calibration.
 
 ``--quick`` shrinks every section (for a smoke run).
 """
@@ -100,157 +100,115 @@ def section_fit(quick):
           "distances in prior widths)")
 
 
-def section_mcmc(quick):
-    print("\n== 3. MCMC: chain length vs error against a long reference chain")
-    _, y = truth_and_profile()
-    ref_steps = 4000 if quick else 24000
-    lengths = (500, 1000) if quick else (1000, 2000, 4000, 8000)
-
-    def run(steps, seed):
-        s = CalibrationSettings(n_starts=2, fit_budget=3000, max_steps=steps, check_every=500,
-                                min_tau_multiple=1e9)  # never stop early: fixed length
-        t = time.perf_counter()
-        r = calibrate(y, "HELI", settings=s, random_state=seed)
-        return r, time.perf_counter() - t
-
-    ref, t_ref = run(ref_steps, 100)
-    rd = ref.draws()
-    keep = [IDX[n] for n in ("A_a", "A_b", "A_p", "A_m", "w_a", "w_b", "C_p", "C_m")]
-    mu, sd = rd[:, keep].mean(0), rd[:, keep].std(0)
-    q = np.quantile(rd[:, keep], [0.05, 0.95], axis=0)
-    print(f"  reference: {ref_steps} steps, {t_ref:.0f} s, max tau {ref.diagnostics['tau_max']:.0f}, "
-          f"chain/tau {ref.diagnostics['steps_over_tau']:.1f}")
-    print(f"  {'steps':>6s} {'s':>6s} {'|mean err|/sd (med, max)':>26s} {'|q05,q95 err|/sd (med, max)':>29s}")
-    for n in lengths:
-        r, t = run(n, 1)
-        d = r.draws()[:, keep]
-        em = np.abs(d.mean(0) - mu) / sd
-        eq = np.abs(np.quantile(d, [0.05, 0.95], axis=0) - q) / sd
-        print(f"  {n:6d} {t:6.1f} {np.median(em):12.2f} {em.max():12.2f} {np.median(eq):14.2f} {eq.max():13.2f}")
+OPTIONS = {"ramps": 32, "sbc_draws": 20, "sbc_ramps": 32, "time_budget": 3600.0}
 
 
-def section_full(quick):
-    print("\n== 4. full HELI calibration, default settings (one profile, noise 1% of the peak)")
-    _, y = truth_and_profile()
-    s = CalibrationSettings.quick() if quick else CalibrationSettings()
+def scene_profiles(cls, ramps, n=5, seed=11):
+    from mdaug.generator.scene import SceneConfig, simulate_campaign
+
+    return simulate_campaign(cls, 1, n, seed, scene=SceneConfig(n_ramps=ramps, specimen_spread=0.0)).profiles
+
+
+def section_likelihood(quick):
+    from mdaug.generator.acquisition import Acquisition
+    from mdaug.generator.synthetic import SyntheticDraws
+
+    k = OPTIONS["ramps"]
+    print(f"\n== 3. marginal likelihood: cost and Monte Carlo error against draws (HELI, K = {k}, 5 measurements, "
+          "16 walkers a batch, median of 3)")
+    acq = Acquisition.measured(k)
+    heli = HELI.to_array()
+    carrier, noise, offset = np.full((16, 5), 0.1), np.full((16, 5), -45.0), np.zeros((16, 5))
+    x = np.repeat(heli[None], 16, 0)
+    ref = SyntheticDraws(acq, 1, n_acquisitions=16 if quick else 128, ramps_drawn=min(k, 32), seed=999)
+    mu_ref = ref.profiles(x[:1], carrier[:1], noise[:1], offset[:1], stride=8)[0].mean(axis=1)
+    grid = ((4, 4), (8, 8)) if quick else ((4, 4), (8, 8), (16, 8), (16, 16), (32, 16))
+    print(f"  {'O':>3s} {'I':>3s} {'ms/evaluation':>14s} {'MC error':>9s}")
+    for o, i in grid:
+        mus, secs = [], []
+        for seed in range(3 if quick else 6):
+            sd = SyntheticDraws(acq, 1, n_acquisitions=o, ramps_drawn=i, seed=seed)
+            t = time.perf_counter()
+            p = sd.profiles(x, carrier, noise, offset, stride=8)
+            secs.append((time.perf_counter() - t) / 16)
+            mus.append(p[0].mean(axis=1))
+        err = np.sqrt(np.mean((np.array(mus) - mu_ref) ** 2))
+        print(f"  {o:3d} {i:3d} {1e3 * np.median(secs):14.2f} {err:9.4f}")
+
+
+def _recovery(res, cls):
+    from mdaug.inference.priors import engine_lines
+
+    w_true = np.sort(engine_lines(load_reference(cls).to_array().reshape(-1, 13))[0], axis=-1)
+    lo, hi = np.quantile(res.lines()[..., 0], [0.05, 0.95], axis=0)
+    inside = (lo <= w_true) & (w_true <= hi)
+    return f"{int(inside.sum())} of {inside.size} lines inside their 90% interval"
+
+
+def _calibration(cls, ramps, quick, budget):
+    from mdaug.generator.acquisition import Acquisition
+
+    y = scene_profiles(cls, ramps)
+    s = (CalibrationSettings.quick() if quick else CalibrationSettings()).replace(time_budget=budget)
     t = time.perf_counter()
-    r = calibrate(y, "HELI", settings=s, random_state=0)
+    r = calibrate(y, cls, acquisition=Acquisition.measured(ramps), settings=s, random_state=0)
     took = time.perf_counter() - t
     d = r.diagnostics
-    print(f"  {took:.1f} s total (fit {r.fit['seconds']:.1f} s, MCMC {d['seconds']:.1f} s); "
-          f"{d['chain_steps']} steps x {d['n_walkers']} walkers; max tau {d['tau_max']:.0f}; "
-          f"chain/tau {d['steps_over_tau']:.1f}; min ESS {d['ess_min']:.0f}; converged {r.converged}")
-    print(f"  target: < 60 s to >= 50 tau and ESS >= 400 -> {'met' if r.converged and took < 60 else 'NOT met'}")
-    ident = [k for k, v in d["identified"].items() if v]
-    print(f"  identified: {', '.join(ident)}")
-    print(f"  not identified: {', '.join(k for k, v in d['identified'].items() if not v)}")
+    print(f"  {took:.1f} s total (fit {r.fit['seconds']:.1f} s, MCMC {d['seconds']:.1f} s); {d['chain_steps']} steps "
+          f"x {d['n_walkers']} walkers ({1e3 * d['seconds'] / max(d['chain_steps'], 1):.0f} ms/step); max tau "
+          f"{d['tau_max']:.0f}; chain/tau {d['steps_over_tau']:.1f}; min ESS {d['ess_min']:.0f}; "
+          f"converged {r.converged}; {_recovery(r, cls)}")
+    return r, took
+
+
+def section_heli(quick):
+    k = OPTIONS["ramps"]
+    print(f"\n== 4. HELI from 5 scene-simulated acquisitions, K = {k}, default settings (budget "
+          f"{OPTIONS['time_budget']:g} s)")
+    r, took = _calibration("HELI", k, quick, 60.0 if quick else OPTIONS["time_budget"])
+    print(f"  target: converged (>= 50 tau, min ESS >= 400) in < 90 s -> "
+          f"{'met' if r.converged and took < 90 else 'NOT met'}")
 
 
 def section_quad(quick):
-    print("\n== 5. QUAD (4 engines) with a capped budget")
-    quad = load_reference("QUAD")
-    rng = np.random.default_rng(0)
-    y = np.abs(profiles(quad.to_array())[0] + NOISE * rng.standard_normal(400))
-    steps = 300 if quick else 3000
-    s = CalibrationSettings(n_starts=1, fit_budget=2000 if quick else 8000, max_steps=steps, check_every=500)
-    t = time.perf_counter()
-    r = calibrate(y, "QUAD", settings=s, random_state=0)
-    took = time.perf_counter() - t
-    d = r.diagnostics
-    per_step = d["seconds"] / d["chain_steps"]
-    print(f"  {took:.0f} s total (fit {r.fit['seconds']:.0f} s); {d['n_walkers']} walkers, "
-          f"{per_step * 1e3:.1f} ms/step; tau so far {d['tau_max']:.0f} steps "
-          f"(a lower bound on a chain this short); 50 tau would need >= "
-          f"{50 * d['tau_max'] * per_step / 60:.1f} min; chain/tau {d['steps_over_tau']:.1f}; "
-          f"weak engines {d['weak_engines']}")
+    k = OPTIONS["ramps"]
+    print(f"\n== 5. QUAD from 5 scene-simulated acquisitions, K = {k}, default settings (budget "
+          f"{OPTIONS['time_budget']:g} s)")
+    r, took = _calibration("QUAD", k, quick, 60.0 if quick else OPTIONS["time_budget"])
+    print(f"  target: converged in < 8 min -> {'met' if r.converged and took < 480 else 'NOT met'}")
 
 
 def section_sbc(quick):
     from mdaug.inference.sbc import run_sbc
 
-    n = 4 if quick else 30
-    print(f"\n== 6. simulation-based calibration ({n} prior draws, HELI, noise sigma in [0.005, 0.03])")
+    n, k = (2 if quick else OPTIONS["sbc_draws"]), OPTIONS["sbc_ramps"]
+    budget = 30.0 if quick else 300.0
+    print(f"\n== 6. SBC of the supported case: {n} truths from the prior, 5 acquisitions each through the scene "
+          f"simulator and the chain, K = {k}; time budget {budget:g} s per calibration")
     t = time.perf_counter()
-    out = run_sbc("HELI", n, settings=CalibrationSettings.quick(max_steps=600 if quick else 3000), seed=1,
-                  n_rank=49, n_bins=5)
-    print(f"  {time.perf_counter() - t:.0f} s; pooled chi-square p = {out['pooled_p']:.3g}; "
-          f"min per-quantity p = {out['min_p']:.3g}; converged share {out['converged_share']:.2f}")
-    worst = sorted(out["p_values"].items(), key=lambda kv: kv[1])[:6]
-    print("  lowest p: " + ", ".join(f"{k} {v:.3g}" for k, v in worst))
-    r = out["ranks"] / out["n_rank"]
-    print(f"  share of truths in the outer 10% of their posterior (uniform: 0.10): "
-          f"{np.mean((r < 0.05) | (r > 0.95)):.2f}")
+    out = run_sbc("HELI", n, ramps=k, settings=CalibrationSettings(time_budget=budget), seed=1, n_rank=49, n_bins=5)
+    print(f"  {time.perf_counter() - t:.0f} s ({np.median(out['seconds']):.0f} s per calibration); outer-10% share "
+          f"{out['outer_share']:.2f} (honest: 0.10); pooled chi-square p {out['pooled_p']:.3g}; min p "
+          f"{out['min_p']:.3g}; converged share {out['converged_share']:.2f}")
+    worst = sorted(out["outer_share_by_quantity"].items(), key=lambda kv: -kv[1])[:4]
+    print("  largest outer shares: " + ", ".join(f"{q} {v:.2f}" for q, v in worst))
 
 
-OPTIONS = {"smc_particles": 0, "samplers": "emcee,smc,smc-nojump", "sbc_draws": 24, "sbc_c_bounds": None}
-
-
-def section_sbc_compare(quick):
-    """Same prior draws, same seeds: emcee (quick preset, 3000 steps) against tempered SMC."""
-    from mdaug.inference.sbc import run_sbc
-
-    n = 4 if quick else OPTIONS["sbc_draws"]
-    print(f"\n== 7. SBC, emcee vs tempered SMC ({n} prior draws each, HELI, noise sigma in [0.005, 0.03], "
-          f"C_p, C_m prior {OPTIONS['sbc_c_bounds'] or (0.5, 1.5)}, 1 thread, 49 posterior draws ranked, 5 rank bins)")
-    smc = CalibrationSettings.quick(sampler="smc", n_particles=OPTIONS["smc_particles"], smc_polish=8)
-    configs = {"emcee": CalibrationSettings.quick(max_steps=600 if quick else 3000), "smc": smc,
-               "smc-nojump": smc.replace(smc_jump=0.0)}
-    configs = {k: v for k, v in configs.items() if k in OPTIONS["samplers"].split(",")}
-    print(f"  {'sampler':12s} {'outer 10%':>9s} {'pooled p':>10s} {'min p':>9s} {'KS p':>8s} {'lp p':>8s} "
-          f"{'conv':>5s} {'s/calib':>8s}")
-    from scipy import stats
-
-    for name, s in configs.items():
-        t = time.perf_counter()
-        c = OPTIONS["sbc_c_bounds"]
-        out = run_sbc("HELI", n, settings=s, seed=1, n_rank=49, n_bins=5,
-                      prior_overrides={"C_p": c, "C_m": c} if c else None)
-        took = (time.perf_counter() - t) / n
-        r = out["ranks"] / out["n_rank"]
-        outer = np.mean((r < 0.05) | (r > 0.95))
-        # pooled Kolmogorov-Smirnov of the (jittered, continuous) normalised ranks against U(0, 1)
-        u = (out["ranks"] + np.random.default_rng(0).uniform(size=out["ranks"].shape)) / (out["n_rank"] + 1)
-        ks = stats.kstest(u.ravel(), "uniform").pvalue
-        if name.startswith("smc") and s.n_particles:
-            name = f"{name}@{s.n_particles}"
-        print(f"  {name:12s} {outer:9.2f} {out['pooled_p']:10.3g} {out['min_p']:9.3g} {ks:8.3g} "
-              f"{out['p_values']['log posterior']:8.3g} {out['converged_share']:5.2f} {took:8.1f}")
-    print("  (uniform ranks: outer 10% share 0.10, p-values not small; KS over all quantities pooled, "
-          "which ignores their dependence: read it as a descriptive statistic; lp p: chi-square p of the "
-          "truth's log-posterior rank, small when the sampler misses modes)")
-
-
-def section_full_smc(quick):
-    print("\n== 8. full HELI calibration with sampler='smc', default settings otherwise")
-    _, y = truth_and_profile()
-    s = (CalibrationSettings.quick() if quick else CalibrationSettings()).replace(
-        sampler="smc", n_particles=OPTIONS["smc_particles"])
-    t = time.perf_counter()
-    r = calibrate(y, "HELI", settings=s, random_state=0)
-    took = time.perf_counter() - t
-    d = r.diagnostics
-    print(f"  {took:.1f} s total (fit {r.fit['seconds']:.1f} s, SMC {d['seconds']:.1f} s); "
-          f"{d['smc_n_particles']} particles, {d['smc_stages']} stages, {d['smc_n_evals']} evaluations; "
-          f"ESS {d['ess_min']:.0f}; distinct {d['smc_unique_share']:.0%}; converged {r.converged}")
-
-
-SECTIONS = {"throughput": section_throughput, "fit": section_fit, "mcmc": section_mcmc, "full": section_full,
-            "quad": section_quad, "sbc": section_sbc, "sbc_compare": section_sbc_compare,
-            "full_smc": section_full_smc}
+SECTIONS = {"throughput": section_throughput, "fit": section_fit, "likelihood": section_likelihood,
+            "heli": section_heli, "quad": section_quad, "sbc": section_sbc}
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--sections", default=",".join(SECTIONS), help=f"comma list of {list(SECTIONS)}")
-    ap.add_argument("--smc-particles", type=int, default=0, help="SMC particles in sections 7, 8 (0 = auto)")
-    ap.add_argument("--samplers", default=OPTIONS["samplers"], help="samplers compared in section 7")
-    ap.add_argument("--sbc-draws", type=int, default=24, help="prior draws per sampler in section 7")
-    ap.add_argument("--sbc-c-bounds", default=None, help="LO,HI prior bounds of C_p and C_m in section 7 "
-                    "(default: the reference-derived 0.5,1.5)")
+    ap.add_argument("--ramps", type=int, default=32, help="K of sections 3-5 (default 32)")
+    ap.add_argument("--time-budget", type=float, default=3600.0, help="calibration budget, s (sections 4-5)")
+    ap.add_argument("--sbc-draws", type=int, default=20, help="truths from the prior in section 6")
+    ap.add_argument("--sbc-ramps", type=int, default=32, help="K of the SBC's acquisitions (section 6)")
     args = ap.parse_args()
-    OPTIONS.update(smc_particles=args.smc_particles, samplers=args.samplers, sbc_draws=args.sbc_draws,
-                   sbc_c_bounds=tuple(map(float, args.sbc_c_bounds.split(","))) if args.sbc_c_bounds else None)
+    OPTIONS.update(ramps=args.ramps, time_budget=args.time_budget, sbc_draws=args.sbc_draws,
+                   sbc_ramps=args.sbc_ramps)
     unknown = [n for n in args.sections.split(",") if n not in SECTIONS]
     if unknown:
         ap.error(f"--sections: unknown {unknown}; choose from {list(SECTIONS)}")
