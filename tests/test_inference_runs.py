@@ -65,6 +65,35 @@ def test_interrupted_run_resumes_to_the_uninterrupted_chain(tmp_path, monkeypatc
         quiet_calibrate(y, "HELI", settings=settings, random_state=6, backend_path=tmp_path / "b.h5")
 
 
+def test_ctrl_c_stops_at_a_step_with_the_chain_saved_and_no_dump(tmp_path, monkeypatch, capsys):
+    """A real SIGINT during sampling: the sampler stops at the next step boundary (no
+    exception inside emcee, so none of its parameter dump), the checkpoint and the fit
+    are on disk, and the rerun resumes without redoing the fit."""
+    import signal
+
+    from mdaug.inference.samplers import CalibrationInterrupted
+
+    y = heli_profile(seed=2)
+    calls = {"n": 0}
+    original = LogPosterior.__call__
+
+    def ctrl_c(self, theta):
+        calls["n"] += 1
+        if calls["n"] == 150:
+            signal.raise_signal(signal.SIGINT)
+        return original(self, theta)
+
+    monkeypatch.setattr(LogPosterior, "__call__", ctrl_c)
+    with pytest.raises(CalibrationInterrupted):
+        quiet_calibrate(y, "HELI", settings=TINY, random_state=5, backend_path=tmp_path / "c.h5")
+    monkeypatch.setattr(LogPosterior, "__call__", original)
+    out = capsys.readouterr()
+    assert "emcee" not in out.out + out.err and "params" not in out.out
+    assert (tmp_path / "c.h5").is_file() and (tmp_path / "c.h5.fit.json").is_file()
+    res = quiet_calibrate(y, "HELI", settings=TINY, random_state=5, backend_path=tmp_path / "c.h5")
+    assert res.diagnostics["fit_reused"] and res.diagnostics["resumed_at"] > 0
+
+
 def test_hard_case_equal_roll_and_pitch_frequencies():
     from mdaug.inference import Layout, Priors, prepare_measured
 
