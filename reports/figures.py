@@ -1,38 +1,396 @@
-"""Study figures that combine several layers' outputs."""
+"""The report's figures, drawn from a finished study's results (and the measured and
+synthetic profiles for :func:`measured_vs_synthetic`), all in the one style of
+:mod:`.style`: sized to be shown at 1:1 in the report's column, units on every axis,
+legends for every mark.
+
+Each ``*_figure`` function returns a matplotlib figure (the report saves and embeds
+it); :func:`measured_vs_synthetic` writes its PNG (the study's ``profiles_figure``
+stage calls it).
+"""
 from __future__ import annotations
+
+import re
 
 import numpy as np
 
+from .style import (M_TO_MM, PAGE_WIDTH_IN, RAD_S_PER_HZ, REFERENCE_STYLE, colour, figure_style, save)
 
-def measured_vs_synthetic(measured: dict, synthetic: dict, path, normalisation: str = "peak"):
-    """Per class, the median and 10-90% band of each source's profiles.
 
-    measured: {class: (n, L) profiles}; synthetic: {source name: {class: (m, L)}}.
-    All are normalised alike before plotting. Writes ``path`` (PNG).
-    """
+def _plt():
     import matplotlib
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
-    from ..radar import atomic_write, normalise
+    return plt
 
+
+# ---- measured against synthetic profiles ---------------------------------------------------------
+def measured_vs_synthetic(measured: dict, synthetic: dict, path, normalisation: str = "peak",
+                          bin_m: float | None = None, half_width_bins: int = 80):
+    """Per class, the median and 10-90% band of each source's profiles against range
+    from the target in metres (a profile's bin is ``bin_m`` of chain range wide,
+    :attr:`mdaug.radar.RadarConfig.bin_m`; the window is centred on the target).
+
+    measured: {class: (n, L) profiles}; synthetic: {source name: {class: (m, L)}}.
+    All are normalised alike before plotting. Writes ``path`` (PNG).
+    """
+    from ..radar import RadarConfig, normalise
+
+    bin_m = RadarConfig().bin_m if bin_m is None else float(bin_m)
     classes = list(measured)
-    fig, axes = plt.subplots(len(classes), 1, figsize=(9, 3 * len(classes)), sharex=True, squeeze=False)
-    for ax, cls in zip(axes[:, 0], classes):
-        sources = {"measured": measured[cls], **{k: v[cls] for k, v in synthetic.items() if cls in v}}
-        for name, p in sources.items():
-            p = normalise(np.asarray(p, dtype=np.float64), normalisation)
-            bins = np.arange(p.shape[1]) - p.shape[1] // 2
-            lo, med, hi = np.percentile(p, [10, 50, 90], axis=0)
-            line, = ax.plot(bins, med, lw=1.6 if name == "measured" else 1.0, label=f"{name} median (n={len(p)})")
-            ax.fill_between(bins, lo, hi, color=line.get_color(), alpha=0.15)
-        ax.set_title(cls)
-        ax.set_xlim(-80, 80)
-        ax.set_ylabel(f"magnitude ({normalisation})")
-        ax.legend(fontsize=8)
-    axes[-1, 0].set_xlabel("bin relative to peak (10-90% bands shaded)")
-    fig.tight_layout()
-    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=100))
-    plt.close(fig)
+    plt = _plt()
+    with figure_style():
+        fig, axes = plt.subplots(len(classes), 1, figsize=(PAGE_WIDTH_IN, 3.3 * len(classes) + 0.6),
+                                 sharex=True, squeeze=False)
+        for ax, cls in zip(axes[:, 0], classes):
+            sources = {"measured": measured[cls], **{k: v[cls] for k, v in synthetic.items() if cls in v}}
+            for i, (name, p) in enumerate(sources.items()):
+                p = normalise(np.asarray(p, dtype=np.float64), normalisation)
+                x = (np.arange(p.shape[1]) - p.shape[1] // 2) * bin_m
+                lo, med, hi = np.percentile(p, [10, 50, 90], axis=0)
+                c = colour(name.split(" ")[0], i)
+                ax.plot(x, med, color=c, lw=2.2 if name == "measured" else 1.3,
+                        label=f"{name} (n = {len(p)})", zorder=3 if name == "measured" else 2)
+                ax.fill_between(x, lo, hi, color=c, alpha=0.18 if name == "measured" else 0.08, lw=0)
+            ax.set_title(f"{cls}: median profile, 10-90% band shaded", loc="left")
+            ax.set_xlim(-half_width_bins * bin_m, half_width_bins * bin_m)
+            ax.set_ylabel(f"magnitude ({normalisation}-normalised)")
+            ax.legend(loc="upper right", fontsize=9)
+        axes[-1, 0].set_xlabel(f"range from the target (m; chain range, 1 bin = {1e3 * bin_m:.2f} mm)")
+        fig.tight_layout()
+        save(fig, path)
     return path
+
+
+# ---- strategies ------------------------------------------------------------------------------------
+def _ci(m: dict, key: str, cls: str | None = None):
+    ci = m.get("ci") or {}
+    if cls is not None:
+        return ((ci.get("per_class") or {}).get(cls) or {}).get(key)
+    return ci.get(key)
+
+
+def _decimals(ci) -> int:
+    from .report import decimals
+
+    return decimals(ci)
+
+
+def _err(v, ci):
+    if v is None:
+        return np.array([[0.0], [0.0]])
+    if not ci:
+        return np.array([[0.0], [0.0]])
+    return np.array([[max(v - ci[0], 0.0)], [max(ci[1] - v, 0.0)]])
+
+
+def strategies_figure(results: dict, test: str, chosen: str | None, ceiling: tuple | None):
+    """Balanced accuracy and per-class recall (95% intervals) of every strategy's CNN
+    on set ``test``; chance (0.5 balanced) and the ceiling drawn as lines.
+
+    ceiling: (label, balanced accuracy, [lo, hi]) or None."""
+    plt = _plt()
+    classes = list(results["config"]["classes"])
+    names = [n for n, s in results["strategies"].items() if test in s["tests"]]
+    with figure_style():
+        fig, ax = plt.subplots(figsize=(PAGE_WIDTH_IN, 0.62 * len(names) + 2.2))
+        k = len(classes) + 1
+        offsets = np.linspace(0.25, -0.25, k)
+        for row, name in enumerate(names):
+            m = results["strategies"][name]["tests"][test]
+            y = len(names) - 1 - row
+            b = m["balanced_accuracy"]
+            ax.errorbar(b, y + offsets[0], xerr=_err(b, _ci(m, "balanced_accuracy")), fmt="D", color="k",
+                        ms=7, label="balanced accuracy" if row == 0 else None, zorder=4)
+            for j, cls in enumerate(classes):
+                r = m["per_class"][cls]["recall"]
+                if r is None:
+                    continue
+                ax.errorbar(r, y + offsets[j + 1], xerr=_err(r, _ci(m, "recall", cls)), fmt="o",
+                            color=colour(cls, j), ms=5, label=f"recall {cls}" if row == 0 else None, zorder=3)
+        ax.axvline(0.5, **REFERENCE_STYLE, label="chance (balanced accuracy 0.5)")
+        if ceiling is not None:
+            label, value, ci = ceiling
+            ax.axvline(value, color="0.2", ls=":", lw=1.6, label=f"ceiling: {label}, balanced accuracy")
+            if ci:
+                ax.axvspan(ci[0], ci[1], color="0.5", alpha=0.12, lw=0, label="ceiling's 95% interval")
+        ax.set_yticks(range(len(names)), [n + (" (chosen)" if n == chosen else "") for n in reversed(names)])
+        ax.set_ylim(-0.6, len(names) - 0.4)
+        ax.set_xlim(-0.02, 1.02)
+        ax.set_xlabel(f"share of the '{test}' set (bars: 95% bootstrap intervals)")
+        ax.set_ylabel("CNN trained on")
+        ax.grid(axis="y", visible=False)
+        handles, labels = ax.get_legend_handles_labels()
+        fig.legend(handles, labels, loc="lower center", ncol=3, bbox_to_anchor=(0.5, 0.0))
+        legend_rows = 1 + (len(labels) - 1) // 3
+        fig.tight_layout(rect=(0, (0.3 * legend_rows + 0.1) / fig.get_figheight(), 1, 1))
+    return fig
+
+
+def confusion_figure(results: dict, test: str):
+    """Every strategy's confusion matrix on set ``test`` (counts and row shares), each
+    titled with its balanced accuracy and 95% interval."""
+    plt = _plt()
+    names = [n for n, s in results["strategies"].items() if test in s["tests"]]
+    ncol = min(len(names), 5)
+    nrow = int(np.ceil(len(names) / ncol))
+    with figure_style():
+        fig, axes = plt.subplots(nrow, ncol, figsize=(PAGE_WIDTH_IN, 2.7 * nrow + 0.2), squeeze=False)
+        for ax, name in zip(axes.ravel(), names):
+            m = results["strategies"][name]["tests"][test]
+            cm = np.asarray(m["confusion_matrix"], float)
+            share = cm / np.maximum(cm.sum(axis=1, keepdims=True), 1)
+            labels = m["labels"]
+            ax.imshow(share, vmin=0, vmax=1, cmap="Blues")
+            for i in range(len(labels)):
+                for j in range(len(labels)):
+                    ax.text(j, i, f"{int(cm[i, j])}\n{share[i, j]:.0%}", ha="center", va="center", fontsize=10,
+                            color="white" if share[i, j] > 0.6 else "black")
+            ax.set_xticks(range(len(labels)), labels)
+            ax.set_yticks(range(len(labels)), labels)
+            ax.set_xlabel("predicted")
+            ax.set_ylabel("true")
+            ax.grid(False)
+            ci = _ci(m, "balanced_accuracy")
+            d = _decimals(ci)
+            ax.set_title(f"{name}\nbalanced accuracy\n{m['balanced_accuracy']:.{d}f}"
+                         + (f" [{ci[0]:.{d}f}, {ci[1]:.{d}f}]" if ci else ""), fontsize=10)
+        for ax in axes.ravel()[len(names):]:
+            ax.axis("off")
+        fig.tight_layout()
+    return fig
+
+
+# ---- the sweeps --------------------------------------------------------------------------------------
+PARAM_LABEL = {"sigma_p": "sigma_P (relative spread)", "width": "specimen width (x default spreads)"}
+
+
+def sweeps_figure(results: dict, test: str | None):
+    """Balanced accuracy against each strategy's setting (sigma_P, specimen width),
+    one line per fast classifier: on the selection set (solid, with its 95% interval;
+    the choice is made here) and on the test set ``test`` (dashed, for information)."""
+    plt = _plt()
+    rows = results["candidates"]["rows"]
+    sel = results["selection"]["set"]
+    strategies = [s for s in dict.fromkeys(r["strategy"] for r in rows)]
+    if not strategies:
+        return None
+    models = list(dict.fromkeys(r["model"] for r in rows))
+    with figure_style():
+        fig, axes = plt.subplots(1, len(strategies), figsize=(PAGE_WIDTH_IN, 4.4), squeeze=False, sharey=True)
+        for ax, strat in zip(axes[0], strategies):
+            param = next(r["parameter"] for r in rows if r["strategy"] == strat)
+            for i, model in enumerate(models):
+                for set_name, ls, marker in ((sel, "-", "o"), (test, "--", "x")):
+                    if set_name is None:
+                        continue
+                    pts = sorted((r["value"], r["balanced_accuracy"], r.get("balanced_ci")) for r in rows
+                                 if r["strategy"] == strat and r["model"] == model and r["set"] == set_name)
+                    if not pts:
+                        continue
+                    x = np.array([p[0] for p in pts])
+                    y = np.array([p[1] for p in pts])
+                    ax.plot(x, y, ls=ls, marker=marker, color=f"C{i}",
+                            label=f"{model}, {set_name}" + (" (choice)" if set_name == sel else " (information)"))
+                    if set_name == sel and all(p[2] for p in pts):
+                        lo = np.array([p[2][0] for p in pts])
+                        hi = np.array([p[2][1] for p in pts])
+                        ax.fill_between(x, lo, hi, color=f"C{i}", alpha=0.10, lw=0)
+            ch = (results.get("choice") or {}).get(strat) or {}
+            scores = sorted((float(v), sc) for v, sc in (ch.get("scores") or {}).items())
+            if scores:
+                ax.plot([v for v, _ in scores], [sc for _, sc in scores], "-", color="k", lw=2.4, marker="s",
+                        label=f"mean on {sel} (ranks the choice)", zorder=4)
+            if ch.get("value") is not None:
+                ax.axvline(ch["value"], color="k", lw=1.0, alpha=0.6, label="chosen value")
+            ax.axhline(0.5, **REFERENCE_STYLE, label="chance")
+            ax.set_title(strat, loc="left")
+            ax.set_xlabel(PARAM_LABEL.get(param, param))
+            values = sorted({r["value"] for r in rows if r["strategy"] == strat})
+            if len(values) == 1:
+                ax.set_xlim(values[0] - 0.5, values[0] + 0.5)
+        axes[0, 0].set_ylabel("balanced accuracy")
+        axes[0, 0].set_ylim(0.0, 1.0)
+        handles, labels = {}, {}
+        for ax in axes[0]:
+            for h, lab in zip(*ax.get_legend_handles_labels()):
+                handles.setdefault(lab, h)
+        labels = list(handles)
+        fig.legend([handles[k] for k in labels], labels, loc="lower center", ncol=3, bbox_to_anchor=(0.5, 0.0))
+        legend_rows = 1 + (len(labels) - 1) // 3
+        fig.tight_layout(rect=(0, (0.3 * legend_rows + 0.1) / fig.get_figheight(), 1, 1))
+    return fig
+
+
+# ---- calibration -------------------------------------------------------------------------------------
+def posterior_lines_figure(cal: dict, cls: str):
+    """The label-free posterior of a class, one panel per engine: each vibration line's
+    frequency (Hz) and amplitude (mm), median with its 5-95% posterior interval in both
+    directions, and the class reference's line frequencies (dashed)."""
+    plt = _plt()
+    lines = cal["lines"]
+    fq = np.asarray(lines["frequency_q"], float) / RAD_S_PER_HZ  # (3, E, 4) Hz
+    aq = np.asarray(lines["amplitude_q"], float) * M_TO_MM        # (3, E, 4) mm
+    ref = np.asarray(lines.get("reference_frequency") or np.full(fq.shape[1:], np.nan), float) / RAD_S_PER_HZ
+    e = fq.shape[1]
+    ncol = min(e, 2)
+    nrow = int(np.ceil(e / ncol))
+    with figure_style():
+        fig, axes = plt.subplots(nrow, ncol, figsize=(PAGE_WIDTH_IN, 2.9 * nrow + 0.9), squeeze=False)
+        fmax = np.nanmax([np.nanmax(fq[2]), np.nanmax(ref) if np.isfinite(ref).any() else 0.0]) * 1.08
+        amax = np.nanmax(aq[2]) * 1.15
+        for k, ax in enumerate(axes.ravel()):
+            if k >= e:
+                ax.axis("off")
+                continue
+            for j, f in enumerate(ref[k] if k < len(ref) else []):
+                if np.isfinite(f):
+                    ax.axvline(f, **REFERENCE_STYLE, label="class reference's lines" if j == 0 else None)
+            med_f, med_a = fq[1, k], aq[1, k]
+            xerr = np.vstack([med_f - fq[0, k], fq[2, k] - med_f]).clip(min=0)
+            yerr = np.vstack([med_a - aq[0, k], aq[2, k] - med_a]).clip(min=0)
+            ax.errorbar(med_f, med_a, xerr=xerr, yerr=yerr, fmt="o", color=colour(cls), ms=6,
+                        label="posterior: median, 5-95%")
+            ax.set_xlim(0, fmax)
+            ax.set_ylim(0, amax)
+            ax.set_title(f"engine {k}" if e > 1 else f"{cls}: the four vibration lines", loc="left")
+            ax.set_ylabel("amplitude (mm)")
+            ax.set_xlabel("line frequency (Hz)")
+        handles, labels = axes.ravel()[0].get_legend_handles_labels()
+        fig.legend(handles, labels, loc="lower center", ncol=2, bbox_to_anchor=(0.5, 0.0))
+        fig.tight_layout(rect=(0, 0.45 / fig.get_figheight(), 1, 1))
+    return fig
+
+
+# ---- speed against error -------------------------------------------------------------------------
+_RATE = re.compile(r"([\d,.]+)\s*(ms|s|profiles/s)")
+
+
+def _cost_ms(row: dict) -> float | None:
+    """ms per unit of a speed row (parsed from its rate: '8,025 profiles/s', '0.42 ms / evaluation')."""
+    m = _RATE.search(row.get("rate", ""))
+    if not m:
+        return None
+    v = float(m.group(1).replace(",", ""))
+    if m.group(2) == "profiles/s":
+        return 1e3 / v if v > 0 else None
+    return v if m.group(2) == "ms" else 1e3 * v
+
+
+def _short(stage: str, setting: str) -> str:
+    if stage == "generator":
+        return setting.split()[-1]
+    if stage == "likelihood":
+        m = re.search(r"O = \d+", setting)
+        return m.group(0) if m else setting
+    if stage == "chain path":
+        return setting.split()[0]
+    return setting
+
+
+SPEED_UNITS = {"generator": ("f(x): ms per profile", "max |f - float64 f| (peak = 1)"),
+               "likelihood": ("ms per likelihood evaluation", "Monte Carlo error (rms, peak = 1)"),
+               "chain path": ("ms per profile", "max |reduced - literal| (peak = 1)")}
+
+
+def speed_panels(results: dict, test: str | None) -> list[dict]:
+    """Speed-against-error points of every stage: [{stage, xlabel, ylabel, metric, points:
+    [(label, cost, error, error interval or None)]}]; a point with error 0 is the reference."""
+    panels = []
+    rows = (results.get("speed") or {}).get("rows") or []
+    for stage in dict.fromkeys(r["stage"] for r in rows):
+        pts = [(_short(stage, r["setting"]), _cost_ms(r), r["error"], None) for r in rows if r["stage"] == stage]
+        metric = next(r["error_metric"] for r in rows if r["stage"] == stage)
+        xl, yl = SPEED_UNITS.get(stage, ("ms", "error"))
+        panels.append({"stage": stage, "xlabel": xl, "ylabel": yl, "metric": metric, "points": pts})
+    cal = results.get("calibration") or {}
+    pts = []
+    for cls, c in cal.items():
+        d = c["diagnostics"]
+        ess = d.get("ess_min")
+        if ess and d.get("seconds"):
+            pts.append((f"{cls} (chain {d.get('steps_over_tau', float('nan')):.0f} x tau)", d["seconds"],
+                        1.0 / np.sqrt(ess), None))
+    if pts:
+        panels.append({"stage": "calibration", "xlabel": "sampling time (s)",
+                       "ylabel": "MC error of means (post. sd)", "metric": "1/sqrt(min ESS)", "points": pts})
+    if test is not None:
+        pts = []
+        for name, s in results["strategies"].items():
+            m = s["tests"].get(test)
+            if m is not None:
+                ci = _ci(m, "balanced_accuracy")
+                pts.append((f"CNN {name}", s["train_seconds"], 1 - m["balanced_accuracy"],
+                            [1 - ci[1], 1 - ci[0]] if ci else None))
+        for model, c in ((results.get("ceiling") or {}).get("models") or {}).items():
+            m = c["tests"].get(test)
+            if m is not None:
+                ci = _ci(m, "balanced_accuracy")
+                pts.append((f"ceiling {model}", c["train_seconds"], 1 - m["balanced_accuracy"],
+                            [1 - ci[1], 1 - ci[0]] if ci else None))
+        if pts:
+            panels.append({"stage": "training", "xlabel": "training time (s)",
+                           "ylabel": f"1 - balanced accuracy", "metric": f"on '{test}'", "points": pts})
+    return panels
+
+
+def _scale(ax, values, axis: str, room: float = 1.3):
+    """Log axis for values spanning more than a factor 20, else linear from 0; ``room``:
+    the share of the axis beyond the largest value (for labels right of the points)."""
+    v = np.asarray([x for x in values if x is not None and x > 0], float)
+    if not v.size:
+        return
+    if v.max() / v.min() > 20:
+        getattr(ax, f"set_{axis}scale")("log")
+        getattr(ax, f"set_{axis}lim")(v.min() / 2, v.max() * room ** 4)
+    else:
+        getattr(ax, f"set_{axis}lim")(0, v.max() * room)
+
+
+def speed_figure(results: dict, test: str | None):
+    """One panel per stage: cost against error (0 = the reference the others are
+    compared with); training spans two panels, with a legend."""
+    plt = _plt()
+    panels = speed_panels(results, test)
+    if not panels:
+        return None
+    small = [p for p in panels if p["stage"] != "training"]
+    train = next((p for p in panels if p["stage"] == "training"), None)
+    nrow = int(np.ceil((len(small) + (2 if train else 0)) / 3))
+    with figure_style():
+        fig = plt.figure(figsize=(PAGE_WIDTH_IN, 3.4 * nrow + (1.2 if train else 0.3)))
+        gs = fig.add_gridspec(nrow, 3)
+        slots = [(i // 3, i % 3) for i in range(3 * nrow)]
+        for p, (r, c) in zip(small, slots):
+            ax = fig.add_subplot(gs[r, c])
+            pts = [q for q in p["points"] if q[1] is not None]
+            for i, (label, cost, err, _) in enumerate(pts):
+                ax.plot(cost, err, "s" if err == 0 else "o", color=f"C{i % 10}", ms=7)
+                ax.annotate(label + (" (reference)" if err == 0 else ""), (cost, err), textcoords="offset points",
+                            xytext=(6, 5), fontsize=9)
+            _scale(ax, [q[1] for q in pts], "x", room=2.2)
+            ax.set_ylim(0, max([q[2] for q in pts] + [1e-12]) * 1.35)
+            ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))
+            ax.set_title(p["stage"], loc="left")
+            ax.set_xlabel(p["xlabel"])
+            ax.set_ylabel(p["ylabel"])
+        if train:
+            k = len(small)
+            r, c = slots[k]
+            if c == 2:  # no room for two panels on this row
+                r, c = r + 1, 0
+            ax = fig.add_subplot(gs[r, c:c + 2] if c <= 1 else gs[r, c])
+            for i, (label, cost, err, ci) in enumerate(train["points"]):
+                yerr = None if ci is None else np.array([[max(err - ci[0], 0)], [max(ci[1] - err, 0)]])
+                ax.errorbar(cost, err, yerr=yerr, fmt="o" if label.startswith("CNN") else "^",
+                            color=colour(label.split()[-1], i), ms=7, label=label)
+            ax.axhline(0.5, **REFERENCE_STYLE, label="chance")
+            _scale(ax, [q[1] for q in train["points"]], "x")
+            ax.set_ylim(0, max([0.75] + [(q[3] or [0, q[2]])[1] * 1.1 for q in train["points"]]))
+            ax.set_title(f"training (error {train['metric']}, 95% intervals)", loc="left")
+            ax.set_xlabel(train["xlabel"])
+            ax.set_ylabel(train["ylabel"])
+            ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3, fontsize=9)
+        fig.tight_layout()
+    return fig
