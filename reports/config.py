@@ -89,9 +89,11 @@ class ProtocolConfig:
     through_chain: bool = False     # render model-based training sets through the scene + radar chain
     normalisation: str = "peak"
     n_boot: int = 1000
-    # calibration: the phases marginalised under the campaign's acquisition; a time budget
-    # per class (the run is flagged not converged when it ends first)
-    calibration_time_budget: float = 180.0
+    # calibration: the phases marginalised under the campaign's acquisition; a step cap per
+    # class, so the same command gives the same numbers on any machine (the run is flagged
+    # not converged when it ends before 50 tau), and an optional time budget on top
+    calibration_max_steps: int = 400
+    calibration_time_budget: float | None = None
     calibration_starts: int = 2
     calibration_fit_budget: int = 1500
     calibration_draws: int = 16
@@ -122,7 +124,7 @@ class StudyConfig:
         p = dataclasses.replace(
             self.protocol, sigma_p=(0.0, 0.2), specimen_widths=(1.0,), models=("nb", "xgb"), sweep_n_per_class=200,
             cnn_n_per_class=600, cnn_epochs=8, cnn_patience=4, tsaug_n_per_class=300, tsaug_epochs=8, n_boot=200,
-            calibration_time_budget=15.0, calibration_starts=1, calibration_fit_budget=200, calibration_draws=6,
+            calibration_max_steps=60, calibration_starts=1, calibration_fit_budget=200, calibration_draws=6,
             calibration_ramps_drawn=2)
         s = dataclasses.replace(self.simulation, ramps=4, n_calibration=3, n_select=6, n_new={c: 24 for c in self.classes},
                                 new_specimens=2, large_factor=1, ceiling_per_class=80)
@@ -170,14 +172,15 @@ class StudyConfig:
         if bad or not p.specimen_widths:
             raise ValueError(f"{src}: protocol.specimen_widths must be a non-empty list of numbers >= 0, "
                              f"got {p.specimen_widths}")
-        if not p.calibration_time_budget > 0 or p.calibration_draws < 2 or p.calibration_ramps_drawn < 1:
-            raise ValueError(f"{src}: protocol.calibration_time_budget must be > 0 s, calibration_draws >= 2 and "
-                             "calibration_ramps_drawn >= 1")
+        if (p.calibration_time_budget is not None and not p.calibration_time_budget > 0) \
+                or p.calibration_draws < 2 or p.calibration_ramps_drawn < 1:
+            raise ValueError(f"{src}: protocol.calibration_time_budget must be > 0 s (or left out), calibration_draws "
+                             ">= 2 and calibration_ramps_drawn >= 1")
         bad = [s for s in p.sigma_p if not 0 <= s <= 1]
         if bad or not p.sigma_p:
             raise ValueError(f"{src}: protocol.sigma_p must be a non-empty list in [0, 1], got {p.sigma_p}")
         for name in ("sweep_n_per_class", "cnn_n_per_class", "cnn_epochs", "tsaug_n_per_class", "tsaug_epochs",
-                     "calibration_starts", "calibration_fit_budget"):
+                     "calibration_max_steps", "calibration_starts", "calibration_fit_budget"):
             if getattr(p, name) < 1:
                 raise ValueError(f"{src}: protocol.{name} must be >= 1")
         _check_names(src, "protocol.models", p.models, ("svm", "nb", "xgb", "cnn"))

@@ -190,7 +190,8 @@ class Study:
             base = CalibrationSettings.quick() if self.cfg.quick else CalibrationSettings()
             settings = base.replace(time_budget=p.calibration_time_budget, n_starts=p.calibration_starts,
                                     fit_budget=p.calibration_fit_budget, n_acquisitions=p.calibration_draws,
-                                    ramps_drawn=p.calibration_ramps_drawn, max_steps=None)
+                                    ramps_drawn=p.calibration_ramps_drawn, max_steps=p.calibration_max_steps,
+                                    check_every=min(base.check_every, p.calibration_max_steps))
             checkpoint = self.out / "posteriors" / f"{cls}.chain.h5"
             res = calibrate(X, cls, acquisition=acquisition, settings=settings,
                             random_state=_stage_seed(self.cfg, "calibrate", cls), backend_path=checkpoint)
@@ -200,8 +201,11 @@ class Study:
                 f.unlink()  # only needed to resume an interrupted run
             corner_png = self.out / "figures" / f"corner_{cls}.png"
             trace_png = self.out / "figures" / f"trace_{cls}.png"
-            res.plot_corner(corner_png)
-            res.plot_trace(trace_png)
+            from .style import figure_style
+
+            with figure_style():
+                res.plot_corner(corner_png)
+                res.plot_trace(trace_png)
             lines = res.lines()  # (n, E, 4, 2): frequency rad/s, amplitude m
             w_ref, a_ref, _ = engine_lines(res.priors.centres)
             return {"posterior": str(nc), "corner": str(corner_png), "trace": str(trace_png),
