@@ -218,16 +218,9 @@ class SweepResult:
         return fig
 
     def plot(self, path, metric: str = "accuracy") -> Path:
-        from ..radar import atomic_write
+        from ..radar.plots import save_figure
 
-        fig = self.figure(metric)
-        suffix = Path(path).suffix.lstrip(".") or "png"
-        try:
-            return atomic_write(path, lambda fh: fig.savefig(fh, format=suffix, dpi=120))
-        finally:
-            import matplotlib.pyplot as plt
-
-            plt.close(fig)
+        return save_figure(self.figure(metric), path, dpi=120)
 
 
 def sigma_p_sweep(make_train, test_sets: dict, sigma_ps=PUBLISHED_SIGMA_PS, models=FAST_MODELS,

@@ -84,7 +84,7 @@ def run_augment(args) -> int:
     import time
 
     from ..generator.dataset import check_dataset_memory, make_dataset, save_dataset
-    from ..radar import atomic_write, check_outputs
+    from ..radar import check_outputs
     from ..radar.progress import progress_enabled
 
     check_outputs(args.out, args.plot)
@@ -99,16 +99,11 @@ def run_augment(args) -> int:
     result(f"wrote {args.out}: {len(ds)} profiles x {ds.profiles.shape[1]} bins "
            f"({', '.join(ds.settings['classes'])}; {len(ds) / took:,.0f} profiles/s)")
     if args.plot is not None:
-        import matplotlib.pyplot as plt
-
-        from ..radar.plots import plot_profiles
+        from ..radar.plots import plot_profiles, save_figure
 
         title = f"{ds.settings.get('strategy', '')} sigma_P={ds.settings.get('sigma_p', '-')} seed={args.seed}"
         fig = plot_profiles(ds.profiles, ds.labels, title=title)
-        try:
-            atomic_write(args.plot, lambda fh: fig.savefig(fh, format="png", dpi=110))
-        finally:
-            plt.close(fig)
+        save_figure(fig, args.plot)
         result(f"wrote {args.plot}")
     return 0
 

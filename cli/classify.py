@@ -87,13 +87,10 @@ def run_evaluate(args) -> int:
         atomic_write(args.json, lambda fh: fh.write(payload))
         result(f"wrote {args.json}")
     if args.plot is not None:
-        import matplotlib.pyplot as plt
+        from ..radar.plots import save_figure
 
         fig = plot_confusion(m, title=f"{model.name} on {Path(args.test).name}: accuracy {m['accuracy']:.1%}")
-        try:
-            atomic_write(args.plot, lambda fh: fig.savefig(fh, format="png", dpi=110))
-        finally:
-            plt.close(fig)
+        save_figure(fig, args.plot)
         result(f"wrote {args.plot}")
     return 0
 

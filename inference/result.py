@@ -291,7 +291,7 @@ class CalibrationResult:
         import matplotlib.pyplot as plt
         from matplotlib.lines import Line2D
 
-        from ..radar.io import atomic_write
+        from ..radar.plots import save_figure
 
         data, names = self._plot_matrix()
         best = self.best_fit.reshape(self.n_engines, N_PARAMS)
@@ -336,9 +336,7 @@ class CalibrationResult:
         grid[0].legend(handles=[Line2D([], [], color="C3", lw=1.5, label="best fit (global fit)"),
                                 Line2D([], [], color="k", ls="--", lw=1, label="5%, 50%, 95% posterior quantiles")],
                        loc="lower left", bbox_to_anchor=(0.02, 0.0), ncol=2, fontsize=fs, frameon=False)
-        atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=80))
-        plt.close(fig)
-        return path
+        return save_figure(fig, path, dpi=80)
 
     def plot_trace(self, path):
         """Trace plot: every walker's path per sampled coordinate in physical units
@@ -350,7 +348,7 @@ class CalibrationResult:
         matplotlib.use("Agg", force=False)
         import matplotlib.pyplot as plt
 
-        from ..radar.io import atomic_write
+        from ..radar.plots import save_figure
 
         tr = self.idata["chain_trace"]
         chain, steps = tr["theta"].values, tr["step"].values
@@ -395,9 +393,7 @@ class CalibrationResult:
         fig.tight_layout()
         # the first row's panel titles clear of the suptitle
         fig.subplots_adjust(top=1 - (0.15 + lines * (fs - 1) * 1.35 / 72 + 0.3) / height)
-        atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=100))
-        plt.close(fig)
-        return path
+        return save_figure(fig, path, dpi=100)
 
     # ---- files ---------------------------------------------------------------------------
     def save(self, path) -> Path:

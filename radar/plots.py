@@ -1,7 +1,24 @@
 """Pictures of range profiles (matplotlib, no display needed)."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
+
+
+def save_figure(fig, path, dpi: int = 110):
+    """Write a matplotlib figure to ``path`` atomically (format from the suffix, PNG by
+    default) and close it, whatever happens; returns the path. The one place that
+    saves figures."""
+    import matplotlib.pyplot as plt
+
+    from .io import atomic_write
+
+    fmt = Path(path).suffix.lstrip(".").lower() or "png"
+    try:
+        return atomic_write(path, lambda fh: fig.savefig(fh, format=fmt, dpi=dpi))
+    finally:
+        plt.close(fig)
 
 
 def plot_profiles(profiles: np.ndarray, labels: np.ndarray, path=None, title: str = "",
@@ -36,6 +53,5 @@ def plot_profiles(profiles: np.ndarray, labels: np.ndarray, path=None, title: st
         axes[0].set_title(title)
     fig.tight_layout()
     if path is not None:
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
+        save_figure(fig, path)
     return fig

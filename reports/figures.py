@@ -331,7 +331,7 @@ def speed_panels(results: dict, test: str | None) -> list[dict]:
                             [1 - ci[1], 1 - ci[0]] if ci else None))
         if pts:
             panels.append({"stage": "training", "xlabel": "training time (s)",
-                           "ylabel": f"1 - balanced accuracy", "metric": f"on '{test}'", "points": pts})
+                           "ylabel": "1 - balanced accuracy", "metric": f"on '{test}'", "points": pts})
     return panels
 
 

@@ -103,7 +103,7 @@ class Study:
         from ..generator.acquisition import Acquisition, acquisition_from_file
 
         sets, acqs = {}, []
-        groups = [("calibration", f"calibration_{{}}"), ("select", "select_{}")]
+        groups = [("calibration", "calibration_{}"), ("select", "select_{}")]
         for group, fmt in groups:
             for cls, path in getattr(self.cfg.data, group).items():
                 ps = load_profiles(path)

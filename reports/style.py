@@ -80,10 +80,6 @@ def figure_style():
 
 def save(fig, path, dpi: int = DPI):
     """Write ``fig`` to ``path`` as PNG (atomic) and close it."""
-    import matplotlib.pyplot as plt
+    from ..radar.plots import save_figure
 
-    from ..radar import atomic_write
-
-    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=dpi))
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=dpi)

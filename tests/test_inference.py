@@ -8,7 +8,6 @@ from mdaug.generator import IDX, N_PARAMS, load_reference, profiles
 from mdaug.inference import (CalibrationResult, CalibrationSettings, Layout, LogPosterior, PosteriorAugmenter,
                              Priors, calibrate, prepare_measured)
 from mdaug.inference.fit import global_fit
-from mdaug.inference.priors import align_lines
 from mdaug.radar import DataFileError, RadarConfig
 
 RADAR = RadarConfig()
@@ -202,7 +201,6 @@ def quick_heli():
     y = np.stack(ys)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        # recovery is checked in the truth's labelling (align_lines)
         res = calibrate(y, "HELI", settings=CalibrationSettings.quick(max_steps=3000), random_state=7)
     return truth, res
 

@@ -16,7 +16,7 @@ from mdaug.classify import evaluate
 from mdaug.reports import figures
 from mdaug.reports.config import StudyConfig
 from mdaug.reports.readme import BEGIN, END, README, check_readme, current_section, replace_section, results_section
-from mdaug.reports.report import SECTIONS, command, decimals, finding, get, write_report
+from mdaug.reports.report import SECTIONS, command, decimals, get, write_report
 from mdaug.reports.study import STRATEGY_TEXT
 
 ROOT = Path(__file__).resolve().parents[1]
