@@ -697,6 +697,11 @@ def choice_section(r: dict, figs: Figures, w: Html) -> str:
     if rows:
         out.append(table(["strategy", "setting", "chosen", "mean balanced accuracy on the selection set",
                           "rule"], rows))
+    if any(c.get("parameter") == "width" for c in r["choice"].values()):
+        out.append("<p>The specimen width says how much other drones of a class differ from the calibrated one. "
+                   "Only a selection set of other specimens can show that; a set of the calibration drones' own "
+                   "acquisitions (the simulated study's 'select') has no specimen variation, so on it the width "
+                   "is chosen blind to what it models.</p>")
     best = r.get("best_strategy") or {}
     if best.get("name"):
         sc = best.get("scores") or {}

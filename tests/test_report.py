@@ -267,6 +267,14 @@ def test_choice_section_states_the_rule_and_the_unused_peeking_choice(report):
     text = visible_text(page[page.index('<section id="choice">'):page.index('<section id="profiles">')])
     assert "balanced accuracy" in text and "never on a test set" in text
     assert "not used" in text and "sigma_P = 0.00" in text
+    assert "chosen blind to what it models" in text  # a specimen width was chosen
+
+
+def test_choice_section_warns_about_the_width_only_when_one_was_chosen(tmp_path):
+    results = synthetic_results(tmp_path)
+    results["choice"].pop("posterior_specimens")
+    text = visible_text(write_report(results, tmp_path / "report.html").read_text())
+    assert "never on a test set" in text and "chosen blind" not in text
 
 
 def test_figures_have_units_and_readable_fonts(report):
