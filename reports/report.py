@@ -820,7 +820,18 @@ def details_section(r: dict, w: Html) -> str:
                  for k, v in (r.get("timings") or {}).items()])
     return (details("Data sets", data) + details(f"Acquisition: {r['acquisition_text']}", acq)
             + details("Configuration", cfg)
-            + details(f"Stage timings (total {fmt(r.get('total_seconds'), 0)} s)", tim))
+            + details(_timings_title(r), tim))
+
+
+def _timings_title(r: dict) -> str:
+    """'Stage timings (...)': the stages' own seconds (a resumed stage keeps the time it took
+    when it ran) and, after a resume, this invocation's wall time beside them."""
+    stages = sum((r.get("timings") or {}).values())
+    resumed = len(r.get("resumed_stages") or [])
+    if not resumed:
+        return f"Stage timings (total {fmt(stages, 0)} s)"
+    return (f"Stage timings (stages {fmt(stages, 0)} s; this run {fmt(r.get('total_seconds'), 0)} s, "
+            f"{resumed} stage(s) resumed from the cache)")
 
 
 def write_report(results: dict, path) -> Path:

@@ -384,3 +384,13 @@ def test_report_screenshots(report, tmp_path):
     assert 3000 < page[1][1] < expanded[1][1]  # the folded sections hold more
     im = np.asarray(Image.open(page[0]).convert("L"))
     assert im.std() > 10  # not blank
+
+
+def test_stage_timings_keep_the_time_of_resumed_stages(tmp_path):
+    """A resumed run took ~0 s itself: the title gives the stages' own time and says so."""
+    results = synthetic_results(tmp_path)  # data 40 s (resumed) + calibrate_HELI 250 s; this run 900 s
+    text = visible_text(write_report(results, tmp_path / "report.html").read_text())
+    assert "Stage timings (stages 290 s; this run 900 s, 1 stage(s) resumed from the cache)" in text
+    results["resumed_stages"] = []
+    text = visible_text(write_report(results, tmp_path / "fresh.html").read_text())
+    assert "Stage timings (total 290 s)" in text
