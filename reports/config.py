@@ -90,7 +90,7 @@ class ProtocolConfig:
     normalisation: str = "peak"
     n_boot: int = 1000
     # calibration: the phases marginalised under the campaign's acquisition; a step cap per
-    # class, so the same command gives the same numbers on any machine (the run is flagged
+    # class, so the same command gives the same numbers however busy the machine (the run is flagged
     # not converged when it ends before 50 tau), and an optional time budget on top
     calibration_max_steps: int = 400
     calibration_time_budget: float | None = None
