@@ -218,8 +218,12 @@ def test_sbc_uniform_ranks():
 
 @pytest.mark.slow
 def test_engine_count_auto_prefers_one_engine_for_heli():
-    res = quiet_calibrate(heli_profile(noise=0.005, seed=9), "HELI", engines="auto",
-                          settings=CalibrationSettings.quick(max_steps=2000), random_state=4, candidates=(1, 2))
+    from mdaug.inference.compare import select_engines
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = select_engines(heli_profile(noise=0.005, seed=9), "HELI", candidates=(1, 2),
+                             settings=CalibrationSettings.quick(max_steps=2000), random_state=4)
     table = {row["engines"]: row for row in res.comparison}
     assert set(table) == {1, 2} and res.n_engines == 1 and table[1]["chosen"]
     assert "engine-count comparison" in res.report()
