@@ -111,8 +111,8 @@ class Study:
                 sets[fmt.format(cls)] = (X, np.full(len(X), cls))
                 acqs.append((path, acquisition_from_file(ps.extra, path)))
         if self.cfg.data.select:
-            sets["select"] = tuple(np.concatenate([sets.pop(f"select_{c}")[i] for c in self.cfg.classes])
-                                   for i in (0, 1))
+            parts = [sets.pop(f"select_{c}") for c in self.cfg.classes]
+            sets["select"] = (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
         for name, path in self.cfg.data.test.items():
             ps = load_profiles(path)
             sets[name] = (ps.profiles, ps.labels)

@@ -154,3 +154,26 @@ def test_worker_processes_give_the_serial_results(quick_study, tmp_path):
     assert metrics(parallel) == metrics(serial)
     assert [row["balanced_accuracy"] for row in parallel["candidates"]["rows"]] == \
         [row["balanced_accuracy"] for row in serial["candidates"]["rows"]]
+
+
+def test_a_select_file_per_class_becomes_one_selection_set(tmp_path):
+    """[data] select = {HELI = ..., QUAD = ...}: each file gives its class's rows, and the
+    data stage joins them into the one 'select' set (both classes, every row once)."""
+    from mdaug.reports.config import load_config
+
+    rng = np.random.default_rng(0)
+
+    def write(name, labels):
+        profiles = rng.uniform(0.1, 1.0, (len(labels), 400))
+        np.savez(tmp_path / name, profiles=profiles, labels=np.array(labels), ramps_per_frame=np.array(4))
+
+    write("cal_HELI.npz", ["HELI"] * 3)
+    write("cal_QUAD.npz", ["QUAD"] * 3)
+    write("select_both.npz", ["HELI"] * 4 + ["QUAD"] * 6)  # one file for both classes: each takes its own rows
+    write("new.npz", ["HELI"] * 2 + ["QUAD"] * 2)
+    (tmp_path / "study.toml").write_text(
+        '[data]\ncalibration = { HELI = "cal_HELI.npz", QUAD = "cal_QUAD.npz" }\n'
+        'select = { HELI = "select_both.npz", QUAD = "select_both.npz" }\ntest = { new = "new.npz" }\n')
+    index = Study(load_config(tmp_path / "study.toml"), tmp_path / "out", log=lambda *_: None).data()
+    assert index["sets"]["select"]["per_class"] == {"HELI": 4, "QUAD": 6}
+    assert "select_HELI" not in index["sets"] and index["acquisition"]["ramps"] == 4
