@@ -77,8 +77,7 @@ def _find_verb(argv: list[str]) -> str | None:
 
 
 def _one_line(exc: BaseException) -> str:
-    text = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
-    return " ".join(str(text).split()) or type(exc).__name__
+    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 def main(argv=None) -> int:
@@ -110,7 +109,7 @@ def main(argv=None) -> int:
         return int(args.func(args) or 0)
     except UsageError as exc:
         print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
-    except (ValueError, DataFileError, OSError, KeyError, MemoryError) as exc:
+    except (ValueError, DataFileError, OSError, MemoryError) as exc:  # not KeyError: that is a bug, with its traceback
         print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
     except KeyboardInterrupt:
         print(f"{prog}: interrupted; {args.interrupted(args)}", file=sys.stderr)
