@@ -83,11 +83,11 @@ class SyntheticDraws:
             self.residual_r0 = self.r0 + acq.drift_bins * rng.standard_normal(o) * radar.model_range_per_bin()
             self.residual_phase = rng.uniform(-np.pi, np.pi, o)
         noise = rng.standard_normal((o, self.I, radar.samples_per_chirp))
-        self.noise_spectra = scipy.fft.rfft(noise, n=radar.fft_points, axis=-1)[..., self.band].astype(np.complex64)
+        noise_spectra = scipy.fft.rfft(noise, n=radar.fft_points, axis=-1)[..., self.band].astype(np.complex64)
         ph = radar.model_k * self.r0[:, None] * self.t + self.carrier_phase[:, None]
         self.tone_spectra = scipy.fft.rfft(np.cos(ph), n=radar.fft_points, axis=-1)[:, self.band].astype(np.complex64)
         self.ramp_times = np.arange(self.I) * radar.ramp_period_s
-        self._noise_t = np.ascontiguousarray(self.noise_spectra.reshape(o * self.I, -1).T)  # (band, O I)
+        self._noise_t = np.ascontiguousarray(noise_spectra.reshape(o * self.I, -1).T)  # (band, O I)
         self._tone_t = np.ascontiguousarray(self.tone_spectra.T)  # (band, O)
 
     # ---- the draws as AcquisitionDraws (for checks against the renderer) ------------------
