@@ -24,11 +24,14 @@ import numpy as np
 
 from ..generator import IDX, N_PARAMS, ClassParams, load_reference
 from ..generator.acquisition import Acquisition
+from ..generator.line_moments import carrier_line_factor
 from ..radar import RadarConfig, atomic_write
 from ..radar.seeds import seed_sequence
 from .ensemble import fingerprint
 from .fit import FitResult, global_fit
-from .layout import Layout
+from .closed_form import ClosedFormLikelihood
+from .layout import DEFAULT_STEADY, Layout
+from .line_layout import LineLayout
 from .likelihood import LogPosterior, prepare_measured
 from .priors import PHASE_NAMES, SHARED, Priors
 from .result import FORMAT, IDENTIFIED_RATIO, CalibrationResult, import_arviz
@@ -57,7 +60,7 @@ def use_marginal(acquisition: Acquisition, settings: CalibrationSettings) -> boo
     when the acquisition draws them at random or averages several ramps or an MTI
     residual (the published single chirp at fixed phases fits them)."""
     if settings.likelihood != "auto":
-        return settings.likelihood == "marginal"
+        return settings.likelihood in ("marginal", "synthetic")
     return acquisition.phases == "uniform" or acquisition.ramps > 1 or acquisition.mti_depth > 0
 
 
@@ -70,10 +73,15 @@ def make_likelihood(data: np.ndarray, ref: ClassParams, n_engines: int, acquisit
         if settings.normalisation != "peak":
             raise ValueError(f"the marginal likelihood compares peak-normalised profiles; normalisation "
                              f"{settings.normalisation!r} is only available with fitted phases (likelihood='fitted')")
-        layout = Layout(n_engines, data.shape[0], priors, marginal=True)
-        return SyntheticLikelihood(data, layout, acquisition, radar, n_acquisitions=settings.n_acquisitions,
-                                   ramps_drawn=settings.ramps_drawn, stride=settings.stride, seed=ss,
-                                   dtype=settings.dtype)
+        if settings.likelihood == "synthetic":
+            layout = Layout(n_engines, data.shape[0], priors, marginal=True)
+            return SyntheticLikelihood(data, layout, acquisition, radar, n_acquisitions=settings.n_acquisitions,
+                                       ramps_drawn=settings.ramps_drawn, stride=settings.stride, seed=ss,
+                                       dtype=settings.dtype)
+        layout = LineLayout(n_engines, data.shape[0], priors, carrier_bounds=DEFAULT_STEADY, carrier_name="steady")
+        return ClosedFormLikelihood(data, layout, acquisition, radar, stride=settings.stride,
+                                    floor=settings.model_floor, amp_tol=settings.amp_tol,
+                                    pair_tol=settings.pair_tol, reach_tol=settings.reach_tol)
     layout = Layout(n_engines, data.shape[0], priors, settings.range_offset,
                     sigma_bounds=(settings.sigma_min, settings.sigma_max))
     return LogPosterior(data, layout, radar, normalisation=settings.normalisation, dtype=settings.dtype,
@@ -195,7 +203,12 @@ def _posterior_variables(layout: Layout, theta: np.ndarray):
     post_vars = {name: xe[None, :, 0, :, IDX[name]] for name in ("Gamma",) + SHARED}
     dims = {name: ["engine"] for name in ("Gamma",) + SHARED}
     if layout.marginal:
-        post_vars["carrier"] = layout.carriers(z)[None]
+        level = layout.carriers(z)
+        if layout.carrier_name == "steady":  # the steady line; the body return it implies at least
+            post_vars["steady"] = level[None]
+            dims["steady"] = ["measurement"]
+            level = np.abs(level - carrier_line_factor(xe[:, 0])[:, None])
+        post_vars["carrier"] = level[None]
         post_vars["offset"] = extra[None]
         post_vars["noise_db"] = tail[None]
         dims.update({"carrier": ["measurement"], "offset": ["measurement"], "noise_db": ["measurement"],
@@ -229,14 +242,8 @@ def build_result(ref, layout: Layout, post, fit, run: SamplerRun, theta, lp, log
         idata.add_groups({"chain_trace": trace})
     best_theta = post.theta_from_fit(fit.best_z[None])
     best_x, _ = layout.physics(layout.split_theta(best_theta)[0])
-    if layout.marginal:
-        noise_model = ("Gaussian synthetic likelihood: the acquisition's phases, MTI residual, carrier-return "
-                       "phase, sub-bin range and yaw marginalised by simulation; carrier return and noise floor "
-                       "per measurement")
-        lik = post.settings()
-    else:
-        noise_model = "Gaussian iid per bin on the normalised profile, sigma per measurement (log-uniform)"
-        lik = {"likelihood": "fitted phases"}
+    noise_model = post.noise_model
+    lik = post.settings() if layout.marginal else {"likelihood": "fitted phases"}
     meta = {"format": FORMAT, "class_name": ref.name, "n_engines": layout.E, "n_measurements": layout.M,
             "settings": settings.to_dict(), "priors": layout.priors.to_dict(), "radar": radar.to_dict(),
             "acquisition": acquisition.to_dict(), "likelihood": lik, "marginal": bool(layout.marginal),

@@ -166,15 +166,18 @@ def initial_ball(layout, theta_best: np.ndarray, log_post, n_walkers: int, scale
     out = np.empty((0, layout.dim))
     box = np.ones(layout.dim, bool)
     box[layout.phase_cols] = False
-    for _ in range(200):
+    for attempt in range(200):
         th = theta_best + scale * rng.standard_normal((n_walkers, layout.dim))
         th[:, box] = lo[box] + np.abs(th[:, box] - lo[box])
         th[:, box] = hi[box] - np.abs(hi[box] - th[:, box])
         th[:, layout.phase_cols] = wrap(th[:, layout.phase_cols])
+        th[:, : layout.dim_z] = layout.canonical(th[:, : layout.dim_z])  # the mirror image: same density
         th = th[np.isfinite(log_post(th))]
         out = np.concatenate([out, th])[:n_walkers]
         if len(out) == n_walkers:
             return out
+        if attempt % 10 == 9:  # a narrow support near the best fit: a smaller ball
+            scale = scale * 0.5
     raise ValueError("could not place walkers inside the prior around the best fit "
                      "(is the best fit on the boundary of the ordering constraint w_a < w_b?)")
 
@@ -249,7 +252,7 @@ class EmceeSampler:
         p0, n_modes = start_walkers(post, fit, settings, n_walkers, np.random.default_rng(ball_ss))
         run = run_ensemble(post, p0, settings, seed=int(mc_ss.generate_state(1)[0]), backend_path=backend_path,
                            fp=fingerprint, phase_cols=layout.phase_cols,
-                           relabel=layout.random_relabel if settings.relabel > 0 else None)
+                           relabel=layout.random_relabel if settings.relabel > 0 and layout.labelled else None)
         run.extra["n_start_modes"] = int(n_modes)
         return run
 
@@ -307,7 +310,11 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
     tau, converged, reason, out_of_time = np.full(dim, np.inf), False, "", False
     budget = settings.time_budget
     target = settings.min_tau_multiple * 20.0  # steps: a first guess, replaced at every check
-    bar = progress_bar(total=int(max(target, check)), initial=min(it, int(max(target, check))),
+
+    def bar_total(goal: float) -> int:  # the 50 tau goal, never past the step cap
+        return int(goal if max_steps is None else min(goal, max_steps))
+
+    bar = progress_bar(total=bar_total(max(target, check)), initial=min(it, bar_total(max(target, check))),
                        desc="calibration", unit="step", progress=settings.progress)
     try:
         with stop_on_sigint() as flag, contextlib.redirect_stdout(io.StringIO()):
@@ -317,7 +324,7 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
                     tau = estimate_tau(chain, phase_cols) * k
                     long_enough = it >= settings.min_tau_multiple * tau.max()
                     target = settings.min_tau_multiple * tau.max()
-                    bar.total = int(max(target, it + 1))
+                    bar.total = max(bar_total(target), it)
                     bar.set_postfix_str(f"tau {tau.max():.0f}, {it / tau.max():.1f} tau of "
                                         f"{settings.min_tau_multiple:g}", refresh=True)
                     if long_enough and it > check:

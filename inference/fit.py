@@ -154,7 +154,7 @@ def global_fit(post, settings, seed_seq: np.random.SeedSequence, start=None) -> 
     layout = post.layout
     lo, hi = post.fit_bounds()
     width = hi - lo
-    coarse = post.coarse() if hasattr(post, "coarse") else post
+    coarse = post.coarse()
     rng = np.random.default_rng(seed_seq)
     zs, fs, ns = [], [], []
     for s in range(settings.n_starts):
@@ -162,7 +162,7 @@ def global_fit(post, settings, seed_seq: np.random.SeedSequence, start=None) -> 
             v0 = np.clip(start, lo, hi)
             if layout.phase_cols.size:
                 v0 = scan_phases(post, v0, rng)
-            elif hasattr(post, "nuisance_cols"):  # marginal: each measurement's carrier and noise first
+            elif post.nuisance_cols().size:  # marginal: each measurement's own terms first
                 v0 = polish_subset(post, v0, post.nuisance_cols(), max(50, settings.polish_budget // 2),
                                    int(rng.integers(2**31 - 1)))
             u0 = (np.clip(v0, lo, hi) - lo) / width

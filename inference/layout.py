@@ -27,15 +27,19 @@ from .priors import PERMUTATIONS, PHASE_NAMES, SHARED, Priors, wrap
 DEFAULT_SIGMA_BOUNDS = (1e-4, 1.0)
 DEFAULT_NOISE_DB = (-80.0, -10.0)
 DEFAULT_CARRIER = (0.0, 1.0)
+DEFAULT_STEADY = (0.0, 2.0)
 
 
 class Layout:
     """Columns of z and theta for E engines and M measurements (module doc)."""
 
+    labelled = True  # lines carry roles (a, b, p, m): the samplers' relabel move applies
+
     def __init__(self, n_engines: int, n_meas: int, priors: Priors, range_offset: bool = True, *,
                  marginal: bool = False, sigma_bounds=DEFAULT_SIGMA_BOUNDS, noise_db_bounds=DEFAULT_NOISE_DB,
-                 carrier_bounds=DEFAULT_CARRIER):
+                 carrier_bounds=DEFAULT_CARRIER, carrier_name: str = "carrier"):
         self.E, self.M, self.priors = int(n_engines), int(n_meas), priors
+        self.carrier_name = str(carrier_name)
         self.marginal = bool(marginal)
         self.range_offset = bool(range_offset) and not self.marginal
         self.shared_names = [f"{n}[{k}]" for k in range(self.E) for n in SHARED + (("lnG",) if k else ())]
@@ -62,7 +66,7 @@ class Layout:
     # ---- names and bounds ---------------------------------------------------------
     def meas_names(self, m: int) -> list[str]:
         if self.marginal:
-            return [f"carrier@{m}", f"offset@{m}"]
+            return [f"{self.carrier_name}@{m}", f"offset@{m}"]
         names = [f"{p}[{k}]@{m}" for k in range(self.E) for p in PHASE_NAMES]
         return names + ([f"offset@{m}"] if self.range_offset else [])
 
@@ -78,17 +82,22 @@ class Layout:
     def theta_names(self) -> list[str]:
         return self.z_names() + self.tail_names()
 
-    def z_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        b = self.priors.bounds
-        lo = [b[n.split("[")[0]][0] for n in self.shared_names]
-        hi = [b[n.split("[")[0]][1] for n in self.shared_names]
+    def z_bounds_meas(self) -> tuple[list, list]:
+        """Bounds of the per-measurement block of z, all M measurements (two lists)."""
         if self.marginal:
             per_lo = [self.carrier_bounds[0], self.priors.offset_bins[0]]
             per_hi = [self.carrier_bounds[1], self.priors.offset_bins[1]]
         else:
             per_lo = [-np.pi] * (4 * self.E) + ([self.priors.offset_bins[0]] if self.range_offset else [])
             per_hi = [np.pi] * (4 * self.E) + ([self.priors.offset_bins[1]] if self.range_offset else [])
-        return np.array(lo + per_lo * self.M, float), np.array(hi + per_hi * self.M, float)
+        return per_lo * self.M, per_hi * self.M
+
+    def z_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        b = self.priors.bounds
+        lo = [b[n.split("[")[0]][0] for n in self.shared_names]
+        hi = [b[n.split("[")[0]][1] for n in self.shared_names]
+        per_lo, per_hi = self.z_bounds_meas()
+        return np.array(lo + per_lo, float), np.array(hi + per_hi, float)
 
     def theta_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = self.z_bounds()
@@ -170,13 +179,7 @@ class Layout:
         x = np.asarray(x, float)
         x = np.broadcast_to(x.reshape(-1, self.E, N_PARAMS), (self.M, self.E, N_PARAMS))
         z = np.empty(self.dim_z)
-        g0 = x[0, 0, IDX["Gamma"]]
-        for k in range(self.E):
-            for n in SHARED:
-                z[self.shared_col(k, n)] = x[0, k, IDX[n]]
-            if k:
-                ratio = x[0, k, IDX["Gamma"]] / g0 if g0 > 0 else 1.0
-                z[self.shared_col(k, "lnG")] = np.log(max(ratio, 1e-300))
+        self._fill_shared(z, x[0])
         extra = None if extra is None else np.asarray(extra, float).reshape(-1)
         carrier = None if carrier is None else np.broadcast_to(np.asarray(carrier, float).reshape(-1), (self.M,))
         for m in range(self.M):
@@ -191,6 +194,16 @@ class Layout:
                 zm[4 * self.E] = 0.0 if extra is None else extra[m]
             z[self._z_meas(m)] = zm
         return z
+
+    def _fill_shared(self, z: np.ndarray, x: np.ndarray) -> None:
+        """Write the shared block of z from one measurement's vectors x (E, 13)."""
+        g0 = x[0, IDX["Gamma"]]
+        for k in range(self.E):
+            for n in SHARED:
+                z[self.shared_col(k, n)] = x[k, IDX[n]]
+            if k:
+                ratio = x[k, IDX["Gamma"]] / g0 if g0 > 0 else 1.0
+                z[self.shared_col(k, "lnG")] = np.log(max(ratio, 1e-300))
 
     # ---- symmetries --------------------------------------------------------------------
     def canonical(self, z: np.ndarray) -> np.ndarray:

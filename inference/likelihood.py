@@ -16,6 +16,7 @@ import numpy as np
 from ..generator import profiles as model_profiles
 from ..generator import spectra as model_spectra
 from ..radar import RadarConfig, centred_slices, normalise
+from .base import LogPosteriorBase
 from .layout import Layout
 
 LOG_2PI = float(np.log(2 * np.pi))
@@ -55,11 +56,13 @@ def prepare_measured(profiles, radar: RadarConfig, normalisation: str, what: str
     return normalise(y, normalisation), shifts
 
 
-class LogPosterior:
+class LogPosterior(LogPosteriorBase):
     """log p(theta | data) for a batch of theta (W, dim); callable by emcee with vectorize=True.
 
     data: (M, L) normalised measured profiles; layout: the :class:`Layout`.
     """
+
+    noise_model = "Gaussian iid per bin on the normalised profile, sigma per measurement (log-uniform)"
 
     def __init__(self, data: np.ndarray, layout: Layout, radar: RadarConfig = RadarConfig(), *,
                  normalisation: str = "peak", dtype: str = "float32", sigma_bounds=(1e-4, 1.0),
@@ -147,12 +150,3 @@ class LogPosterior:
         ssr = self.ssr(z)
         ll = -0.5 * ssr * np.exp(-2 * ln_sigma) - self.n_bins * ln_sigma - 0.5 * self.n_bins * LOG_2PI
         return ll.sum(axis=1)
-
-    def __call__(self, theta: np.ndarray) -> np.ndarray:
-        theta = np.atleast_2d(theta)
-        lp = self.layout.log_prior(theta, self.sigma_bounds)
-        ok = np.isfinite(lp)
-        out = np.full(theta.shape[0], -np.inf)
-        if ok.any():
-            out[ok] = lp[ok] + self.log_likelihood(theta[ok])
-        return out

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 FIT_ALGORITHMS = ("GN_CRS2_LM", "GN_MLSL_LDS", "GN_DIRECT_L", "GN_ISRES", "GN_ESCH")
 LOCAL_ALGORITHMS = ("LN_BOBYQA", "LN_NELDERMEAD", "LN_SBPLX")
 SAMPLERS = ("emcee", "smc")
-LIKELIHOODS = ("auto", "marginal", "fitted")
+LIKELIHOODS = ("auto", "marginal", "synthetic", "fitted")
 
 
 @dataclass(frozen=True)
@@ -40,10 +40,15 @@ class CalibrationSettings:
 
     Likelihood: ``likelihood`` ``auto`` (default) uses the acquisition: when its
     phases are random (``uniform``) or it averages several ramps, the phases are
-    marginalised (:class:`.synthetic.SyntheticLikelihood`, ``n_acquisitions`` O
-    simulated acquisitions of ``ramps_drawn`` ramps each, compared every ``stride``
-    bins); the published single chirp at fixed phases fits them
-    (:class:`.likelihood.LogPosterior`, below). ``marginal`` / ``fitted`` force one.
+    marginalised in closed form (:class:`.closed_form.ClosedFormLikelihood`, sampled
+    in line space, :class:`.line_layout.LineLayout`; compared every ``stride`` bins;
+    lines below ``amp_tol`` x sum(Gamma) and sidelobes below ``reach_tol`` left out,
+    pairs of lines below ``pair_tol`` of a bin's power summed at the mean Fejer
+    weight; ``model_floor`` x the peak added to every bin's sd); the published single
+    chirp at fixed phases fits them (:class:`.likelihood.LogPosterior`, below).
+    ``marginal`` / ``fitted`` force one; ``synthetic`` is the Monte-Carlo check of the
+    closed form (:class:`.synthetic.SyntheticLikelihood`, ``n_acquisitions`` O
+    simulated acquisitions of ``ramps_drawn`` ramps each).
 
     Model (fitted phases): ``normalisation`` of measured and model profiles (SPEC section 2);
     ``alignment`` ``tone`` (default) compares the data with model windows centred on
@@ -106,6 +111,10 @@ class CalibrationSettings:
     n_acquisitions: int = 16
     ramps_drawn: int = 16
     stride: int = 8
+    amp_tol: float = 1e-3
+    pair_tol: float = 0.05
+    reach_tol: float = 3e-4
+    model_floor: float = 0.0
 
     def __post_init__(self) -> None:
         if self.fit_algorithm not in FIT_ALGORITHMS:
@@ -148,6 +157,9 @@ class CalibrationSettings:
         if self.n_acquisitions < 2:
             raise ValueError(f"n_acquisitions must be >= 2 (simulated acquisitions per likelihood), got "
                              f"{self.n_acquisitions}")
+        if not (0 < self.amp_tol < 1 and 0 < self.pair_tol <= 1 and 0 < self.reach_tol < 1 and self.model_floor >= 0):
+            raise ValueError(f"CalibrationSettings: amp_tol, pair_tol and reach_tol must be in (0, 1) and model_floor "
+                             f">= 0, got {self.amp_tol}, {self.pair_tol}, {self.reach_tol}, {self.model_floor}")
         if self.dtype not in ("float32", "float64"):
             raise ValueError(f"dtype must be float32 or float64, got {self.dtype!r}")
 

@@ -38,6 +38,7 @@ import numpy as np
 from ..generator.acquisition import Acquisition
 from ..generator.synthetic import SyntheticDraws
 from ..radar import RadarConfig
+from .base import MarginalLikelihood
 from .layout import Layout
 
 LOG_2PI = float(np.log(2 * np.pi))
@@ -82,13 +83,16 @@ def gaussian_loglik(r: np.ndarray, dev: np.ndarray, inflate: float, floor: float
     return -0.5 * (quad + logdet + b * LOG_2PI)
 
 
-class SyntheticLikelihood:
+class SyntheticLikelihood(MarginalLikelihood):
     """log p(theta | data) with the acquisition's random terms marginalised (module doc).
 
     data: (M, L) peak-normalised measured profiles, peak at L // 2; layout: a
     marginal :class:`Layout` (per measurement: carrier return in z, noise floor in
     the tail). Vectorised over walkers: theta (W, dim) -> (W,).
     """
+
+    noise_model = ("Gaussian synthetic likelihood: the acquisition's phases, MTI residual, carrier-return phase, "
+                   "sub-bin range and yaw marginalised by simulation; carrier return and noise floor per measurement")
 
     def __init__(self, data: np.ndarray, layout: Layout, acquisition: Acquisition,
                  radar: RadarConfig = RadarConfig(), *, n_acquisitions: int = 16, ramps_drawn: int = 8,
@@ -110,7 +114,6 @@ class SyntheticLikelihood:
         self.y = self.data[:, radar.slice_length // 2 + self.offsets]  # (M, B)
         self.inflate = 1.0 + layout.M / self.draws.O
         self.n_calls = 0
-        self.sigma_bounds = None  # (the fitted-phase likelihood's; unused here)
 
     @property
     def n_bins(self) -> int:
@@ -141,46 +144,6 @@ class SyntheticLikelihood:
         mu = p.mean(axis=2)  # (W, M, B)
         dev = p - mu[:, :, None]
         return gaussian_loglik(self.y[None] - mu, dev, self.inflate, self.floor)
-
-    def log_likelihood(self, theta: np.ndarray) -> np.ndarray:
-        return self.pointwise(theta).sum(axis=1)
-
-    def __call__(self, theta: np.ndarray) -> np.ndarray:
-        theta = np.atleast_2d(theta)
-        lp = self.layout.log_prior(theta)
-        ok = np.isfinite(lp)
-        out = np.full(theta.shape[0], -np.inf)
-        if ok.any():
-            out[ok] = lp[ok] + self.log_likelihood(theta[ok])
-        return out
-
-    # ---- the fit space (all of theta; see .fit) -----------------------------------------
-    def fit_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.layout.theta_bounds()
-
-    def fit_objective(self, v: np.ndarray) -> np.ndarray:
-        """Negative log-likelihood (W,), +inf where the ordering constraints fail."""
-        v = np.atleast_2d(v)
-        ok = np.isfinite(self.layout.log_prior(v, any_tail=True))
-        out = np.full(len(v), np.inf)
-        if ok.any():
-            out[ok] = -self.log_likelihood(v[ok])
-        return out
-
-    def canonical_fit(self, v: np.ndarray) -> np.ndarray:
-        v = np.atleast_2d(v)
-        return np.concatenate([self.layout.canonical(v[:, : self.layout.dim_z]), v[:, self.layout.dim_z:]], axis=1)
-
-    def nuisance_cols(self) -> np.ndarray:
-        """Fit-space columns of the measurements' own terms (carrier returns and noise floors)."""
-        return np.arange(self.layout.n_shared, self.layout.dim)
-
-    def fit_noise(self, v: np.ndarray) -> np.ndarray:
-        """Noise floor (W, M) in dB at fit-space points."""
-        return np.atleast_2d(v)[:, self.layout.dim_z:]
-
-    def theta_from_fit(self, v: np.ndarray) -> np.ndarray:
-        return np.atleast_2d(np.asarray(v, float)).copy()
 
     def coarse(self, n_acquisitions: int = 4, ramps_drawn: int = 2) -> "SyntheticLikelihood":
         """A cheaper copy (fewer simulated acquisitions and ramps) for the fit's global stage."""

@@ -341,7 +341,7 @@ class SMCSampler:
                       ess_target=settings.smc_ess, p_move=settings.smc_p_move, max_sweeps=settings.smc_max_sweeps,
                       max_stages=settings.smc_max_stages, phase_cols=layout.phase_cols, bounds=bounds,
                       p_redraw=settings.smc_redraw, modes=modes, p_jump=settings.smc_jump,
-                      relabel=layout.random_relabel, p_relabel=settings.relabel, backend_path=backend_path,
+                      relabel=layout.random_relabel if layout.labelled else None, p_relabel=settings.relabel, backend_path=backend_path,
                       fp=fingerprint, progress=settings.progress)
         ess = float(smc.ess[-1]) if smc.ess.size else float(n)
         acc = float(smc.acceptance[-1]) if smc.acceptance.size else 1.0

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from mdaug.generator import IDX, N_PARAMS, load_reference, profiles
+from mdaug.inference.base import LogPosteriorBase
 from mdaug.inference import (CalibrationResult, CalibrationSettings, Layout, LogPosterior, PosteriorAugmenter,
                              Priors, calibrate, prepare_measured)
 from mdaug.inference.fit import global_fit
@@ -139,7 +140,7 @@ def test_fit_matches_the_truth_on_a_noise_free_profile():
     assert 1 <= fit.n_agree <= 2 and fit.evals.sum() <= 2 * (800 + 4000) + 4000 + 10  # + polish of the start
 
 
-class _DoubleWell:
+class _DoubleWell(LogPosteriorBase):
     """A stand-in posterior whose misfit has two equally deep, distant minima."""
 
     def __init__(self, layout):
