@@ -13,8 +13,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import (SIGN_POLICIES, acquisition_from_args, acquisition_given, add_acquisition_options, add_verb,
-                     class_list, info, nonneg_float, positive_int, result, seed_int, unit_fraction, warn)
+from .common import (SAMPLES, SECONDS_CHAIN_RAMP, SECONDS_FAST_RAMP, SIGN_POLICIES, acquisition_from_args,
+                     acquisition_given, add_acquisition_options, add_verb, check_size, class_list, info, nonneg_float,
+                     positive_int, result, seed_int, unit_fraction, warn)
 
 DEFAULT_CLASSES = ("HELI", "QUAD")
 DEFAULT_SIGMA_P = 0.2
@@ -80,16 +81,33 @@ def augmenters_from_args(args) -> tuple[list, dict | None]:
     return augs, extra
 
 
+def check_augment_sizes(args, augmenters) -> None:
+    """The ramps (the chain's included) and the counts against memory and time."""
+    n = ("--n-per-class", args.n_per_class, 16000)
+    for aug in augmenters:
+        acq, e = aug.renderer.acquisition, aug.n_engines
+        ramps = ("--ramps", acq.ramps, 32)
+        if args.through_chain:
+            frames = ("--mti-depth (+ 1 frames)", acq.mti_depth + 1, 11)
+            check_size(ramps, frames, bytes_each=e * SAMPLES * 8 * 4, what="ramp frames of one profile")
+            check_size(n, ramps, frames, seconds_each=e * SECONDS_CHAIN_RAMP / 11, what=f"{aug.label} ramp frames")
+        else:
+            check_size(n, ramps, seconds_each=e * SECONDS_FAST_RAMP, what=f"{aug.label} rendered ramps")
+
+
 def run_augment(args) -> int:
     import time
 
     from ..generator.dataset import check_dataset_memory, make_dataset, save_dataset
-    from ..radar import check_outputs
     from ..radar.progress import progress_enabled
+    from .guard import Output, check_paths
 
-    check_outputs(args.out, args.plot)
+    check_paths(inputs=[(f"--{opt} {cls}=", path) for opt in ("fit", "posterior")
+                        for cls, path in (getattr(args, opt) or [])],
+                outputs=[Output("--out", args.out, "npz"), Output("--plot", args.plot, "plot")])
     augmenters, extra = augmenters_from_args(args)
     check_dataset_memory(augmenters, args.n_per_class, what="--n-per-class")
+    check_augment_sizes(args, augmenters)
     info(f"synthesising {args.n_per_class:,} profiles per class of {', '.join(a.label for a in augmenters)}")
     t0 = time.perf_counter()
     ds = make_dataset(augmenters, args.n_per_class, args.seed, extra_settings=extra,
