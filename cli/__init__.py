@@ -77,6 +77,11 @@ def _find_verb(argv: list[str]) -> str | None:
 
 
 def _one_line(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:  # name the path, once
+        from .guard import shown
+
+        extra = f" -> {shown(exc.filename2)}" if exc.filename2 is not None else ""
+        return f"{shown(exc.filename)}{extra}: {exc.strerror}"
     return " ".join(str(exc).split()) or type(exc).__name__
 
 

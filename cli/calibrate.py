@@ -2,8 +2,9 @@
 
 Exit status: 0 when the sampler converged, 3 when it did not (the posterior is still
 written, flagged not converged in the file and on stderr) unless
-``--allow-unconverged`` is given, 2 on bad input, 130 when interrupted (the chain
-checkpoint is kept: the same command resumes).
+``--allow-unconverged`` is given, 2 on bad input, 130 when interrupted (the fit and
+the chain checkpoint, where they exist yet, are kept: the same command resumes; the
+message says which exist).
 """
 from __future__ import annotations
 
@@ -165,7 +166,15 @@ def run_calibrate(args) -> int:
 
 
 def _interrupted(args) -> str:
-    return f"the chain checkpoint {_backend(args)} is kept; run the same command again to resume"
+    """What an interrupt leaves, as it is: the checkpoint files that exist now."""
+    kept = [p for p in _checkpoint_files(args) if p.exists()]
+    if not kept:
+        return ("no chain checkpoint was written yet (interrupted before the fit finished); nothing to resume: "
+                "run the same command again to start over")
+    if not any(p.suffix != ".json" for p in kept):
+        return (f"the global fit is kept in {', '.join(map(str, kept))} (no sampler steps yet); run the same "
+                "command again to reuse it")
+    return f"the chain checkpoint {', '.join(map(str, kept))} is kept; run the same command again to resume"
 
 
 def add_calibrate(sub, parents, help):

@@ -359,7 +359,9 @@ def run_baseline(args) -> int:
     if args.out is not None:
         model = tsaug_baseline(data.profiles, data.labels, args.n_per_class, args.seed, epochs=args.epochs, **params)
         save_model(model, args.out)
-        result(f"trained the tsaug-baseline CNN on all {len(data)} profiles; wrote {args.out}")
+        n_aug = args.n_per_class * len(data.classes)
+        result(f"trained the tsaug-baseline CNN on {n_aug:,} tsaug-augmented profiles ({args.n_per_class:,} per "
+               f"class) made from the {len(data)} measured profiles of {args.data}; wrote {args.out}")
         for path, test in tests.items():
             x, y = _check_test(model, test, path)
             report[str(path)] = evaluate(y, model.predict(x), labels=model.classes_.tolist(), random_state=args.seed)

@@ -81,8 +81,10 @@ def run_simulate(args) -> int:
     took = time.perf_counter() - t0
     n = sum(len(c) for c in camps)
     on_target = sum(c.on_target.sum() for c in camps) / n
-    result(f"wrote {args.out}: {n} simulated acquisitions ({', '.join(f'{len(c)} {c.labels[0]}' for c in camps)}) "
-           f"of {args.specimens} specimen(s) per class, {camps[0].profiles.shape[1]}-bin profiles"
+    what = (f"{n} simulated {camps[0].labels[0]} acquisitions of {args.specimens} specimen(s)" if len(camps) == 1 else
+            f"{n} simulated acquisitions ({', '.join(f'{len(c)} {c.labels[0]}' for c in camps)}) of "
+            f"{args.specimens} specimen(s) per class")
+    result(f"wrote {args.out}: {what}, {camps[0].profiles.shape[1]}-bin profiles"
            f"{' + raw cubes' if args.keep_cubes else ''} ({n / took:,.1f} acquisitions/s; {on_target:.0%} on target)")
     return 0
 
