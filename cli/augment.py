@@ -28,8 +28,9 @@ def posterior_arg(text: str) -> tuple[str, Path]:
     return name.strip().upper(), Path(path.strip())
 
 
-def augmenters_from_args(args) -> tuple[list, dict | None]:
-    """The augmenters the options ask for, and the settings they add to the file."""
+def augmenters_from_args(args) -> tuple[list, dict | None, list[str]]:
+    """The augmenters the options ask for, the settings they add to the file, and the
+    warnings to print once every check has passed."""
     from ..generator import Renderer, SigmaPSource, SpecimenSource, SpecimenSpread
     from ..generator.augment import ModelAugmenter
 
@@ -52,14 +53,14 @@ def augmenters_from_args(args) -> tuple[list, dict | None]:
             source = SpecimenSource(source, specimens)
         return ModelAugmenter(source, renderer(acq))
 
-    augs, extra = [], {}
+    augs, extra, warnings = [], {}, []
     if names:
         from ..inference.posterior_augment import PosteriorSource, load_posterior
 
         for cls, path in fits + posts:
             post = load_posterior(path, cls)
             if not post.converged:
-                warn("augment", f"posterior of {cls} ({path}) did not converge: {post.diagnostics['reason']}")
+                warnings.append(f"posterior of {cls} ({path}) did not converge: {post.diagnostics['reason']}")
             acq, perturb = acquisition_from_args(args, post.measured_acquisition())
             if (cls, path) in fits:
                 src = SigmaPSource(post.best_fit, sigma_p, sign_policy=args.sign_policy, perturb_phases=perturb,
@@ -78,7 +79,7 @@ def augmenters_from_args(args) -> tuple[list, dict | None]:
     if specimens is not None:
         extra["specimens"] = specimens.to_dict()
     extra["acquisition_from"] = "options" if acquisition_given(args) else ("calibration" if names else "default")
-    return augs, extra
+    return augs, extra, warnings
 
 
 def check_augment_sizes(args, augmenters) -> None:
@@ -105,9 +106,11 @@ def run_augment(args) -> int:
     check_paths(inputs=[(f"--{opt} {cls}=", path) for opt in ("fit", "posterior")
                         for cls, path in (getattr(args, opt) or [])],
                 outputs=[Output("--out", args.out, "npz"), Output("--plot", args.plot, "plot")])
-    augmenters, extra = augmenters_from_args(args)
+    augmenters, extra, warnings = augmenters_from_args(args)
     check_dataset_memory(augmenters, args.n_per_class, what="--n-per-class")
     check_augment_sizes(args, augmenters)
+    for text in warnings:
+        warn("augment", text)
     info(f"synthesising {args.n_per_class:,} profiles per class of {', '.join(a.label for a in augmenters)}")
     t0 = time.perf_counter()
     ds = make_dataset(augmenters, args.n_per_class, args.seed, extra_settings=extra,

@@ -137,7 +137,6 @@ def check_paths(inputs=(), outputs=()) -> None:
             trees += [(out.option, Path(out.path) / name) for name in out.inside if name.endswith("/")]
         else:
             _check_file(out)
-            _check_format(out)
             written.append((out.option, Path(out.path)))
         written += [(out.option, Path(p)) for p in out.beside]
     ids_in = [(o, p, _identity(p)) for o, p in inputs]
@@ -157,3 +156,6 @@ def check_paths(inputs=(), outputs=()) -> None:
             if _same(o_id, o2_id):
                 raise _error(f"{shown(o_path)}: {o_opt} and {o2_opt} {shown(o2_path)} are the same file; two "
                              "outputs of one command need two paths")
+    for out in outputs:  # formats last: a clash with an input is the graver news
+        if out.kind != "folder":
+            _check_format(out)
