@@ -72,8 +72,15 @@ def save_model(model: ProfileClassifier, path) -> Path:
 
 
 def _read_archive(path: Path) -> tuple[dict, bytes]:
+    if path.is_dir():
+        raise DataFileError(f"{path}: is a folder, not a model file")
     if not path.is_file():
         raise DataFileError(f"{path}: model file not found")
+    try:
+        with open(path, "rb"):
+            pass
+    except OSError as exc:
+        raise DataFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
     if not zipfile.is_zipfile(path):
         raise DataFileError(f"{path}: not an mdaug model file (expected a ZIP archive written by "
                             f"'mdaug train' / save_model)")

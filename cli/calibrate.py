@@ -74,9 +74,11 @@ def check_calibrate_sizes(args, settings, n_measurements: int) -> None:
     evaluation = n_measurements * engines * SECONDS_LIKELIHOOD_RAMP * settings.n_acquisitions * settings.ramps_drawn
     check_size(("--starts", settings.n_starts, 4), ("--fit-budget", settings.fit_budget, 1500),
                seconds_each=evaluation, what="likelihood evaluations of the fit")
-    if settings.n_walkers:
-        check_size(("--walkers", settings.n_walkers, 2 * dim + 2), seconds_each=evaluation,
-                   what="likelihood evaluations of one sampler step")
+    walkers = ("--walkers", settings.n_walkers or max(32, 2 * dim + 2), 2 * dim + 2)
+    check_size(walkers, seconds_each=evaluation, what="likelihood evaluations of one sampler step")
+    if settings.max_steps is not None:  # the step cap also sets how sparsely the chain is stored
+        check_size(("--max-steps", settings.max_steps, 10000), walkers, seconds_each=evaluation,
+                   what="likelihood evaluations of the sampler")
     if settings.n_particles:
         check_size(("--particles", settings.n_particles, 40 * dim), seconds_each=evaluation * 10,
                    bytes_each=dim * 8 * 8, what="particles over the first tempering stage")

@@ -178,6 +178,7 @@ def check_sweep_sizes(args, acq, n_test: int) -> None:
     check_boot_size(args.n_boot, n_test * len(args.sigma_p) * len(args.models))
     check_size(("--workers", args.workers, 1), n, bytes_each=len(args.classes) * CNN_BINS * 8 * 3,
                what="training profiles held at once")
+    check_size(("--workers", args.workers, 1), bytes_each=300 * 2 ** 20, what="worker processes")
 
 
 def run_sweep(args) -> int:

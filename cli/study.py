@@ -11,6 +11,7 @@ from pathlib import Path
 from .common import add_verb, format_table, info, positive_int, result, seed_int, warn
 
 
+WORKER_BYTES = 300 * 2 ** 20  # a worker process with numpy, scikit-learn and torch loaded, at least
 STUDY_FILES = ("report.html", "results.json", "stages/", "data/", "posteriors/", "models/", "figures/")
 """What ``mdaug run`` writes in its --out folder (subfolders end in /)."""
 
@@ -98,6 +99,9 @@ def run_study(args) -> int:
     if args.seed is not None:
         cfg.seed = args.seed
     if args.workers is not None:
+        from .common import check_size
+
+        check_size(("--workers", args.workers, 1), bytes_each=WORKER_BYTES, what="worker processes")
         cfg.workers = args.workers
     if args.scheduler:
         cfg.scheduler = args.scheduler

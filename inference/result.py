@@ -124,6 +124,11 @@ class CalibrationResult:
         else:
             expected.update({n: per_meas + ("engine",) for n in PHASE_NAMES})
             expected.update({n: per_meas for n in ("offset", "sigma")})
+        if "observed_data" in self.idata.groups() and "y" in self.idata.observed_data:
+            y = self.idata.observed_data["y"]
+            if y.ndim != 2 or y.shape[0] != m:
+                raise ValueError(f"observed_data variable 'y' has shape {y.shape}; expected (measurements, bins) "
+                                 f"with {m} measurements (attribute 'mdaug' field 'n_measurements')")
         post = self.idata.posterior
         sizes = {"engine": e, "measurement": m}
         for name, dims in expected.items():
@@ -493,8 +498,15 @@ class CalibrationResult:
         from ..radar import DataFileError
 
         path = Path(path)
+        if path.is_dir():
+            raise DataFileError(f"{path}: is a folder, not a posterior file")
         if not path.exists():
             raise DataFileError(f"{path}: posterior file not found")
+        try:
+            with open(path, "rb"):
+                pass
+        except OSError as exc:
+            raise DataFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
         az = import_arviz()
         try:
             with warnings.catch_warnings():

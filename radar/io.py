@@ -274,6 +274,8 @@ def _read_csv(path: Path) -> tuple[np.ndarray, np.ndarray, dict]:
     except UnicodeDecodeError as exc:
         raise DataFileError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start}); save the CSV as UTF-8") \
             from None
+    except OSError as exc:
+        raise DataFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
     except csv.Error as exc:
         raise DataFileError(f"{path}: not a readable CSV file ({exc})") from None
     if not rows:
@@ -308,6 +310,8 @@ def _read_mat(path: Path) -> dict:
 def read_arrays(path) -> dict:
     """All arrays of an NPZ or .mat file, loaded without pickle."""
     path = Path(path)
+    if path.is_dir():
+        raise DataFileError(f"{path}: is a folder, not a data file")
     if not path.is_file():
         raise DataFileError(f"{path}: file not found")
     if path.stat().st_size == 0:
@@ -346,6 +350,8 @@ def load_profiles(path) -> ProfileSet:
     """Read measured or synthetic profiles from NPZ, CSV or .mat (SPEC section 7)."""
     path = Path(path)
     if path.suffix.lower() == ".csv":
+        if path.is_dir():
+            raise DataFileError(f"{path}: is a folder, not a data file")
         if not path.is_file():
             raise DataFileError(f"{path}: file not found")
         profiles, labels, extra = _read_csv(path)
