@@ -188,7 +188,7 @@ def run_sweep(args) -> int:
 
     from .guard import Output, check_paths
 
-    check_paths(inputs=[("--test", p) for p in args.test],
+    check_paths(inputs=[*(("--test", p) for p in args.test), ("--select", args.select)],
                 outputs=[Output("--out", args.out, "folder", inside=SWEEP_FILES)])
     out = Path(args.out)
     for c in args.classes:
@@ -196,13 +196,13 @@ def run_sweep(args) -> int:
     check_training_memory(2 * args.n_per_class, "--n-per-class", args.n_per_class, len(args.classes))
     length = RadarConfig().slice_length
     tests = {}
-    for path in args.test:
+    for path in args.test + ([args.select] if args.select is not None else []):
         ps = load_profile_file(path, length=length, why="the synthetic training set (400-bin signatures)")
         unknown = sorted(set(ps.classes) - set(args.classes))
         if unknown:
             raise DataFileError(f"{path}: field 'labels' holds classes {unknown} that are not trained "
                                 f"(--classes {','.join(args.classes)})")
-        name = path.stem
+        name = SELECT if path is args.select else path.stem
         if name in tests:
             raise ValueError(f"--test: two test files share the name {name!r}; rename one")
         tests[name] = (ps.profiles, ps.labels)
@@ -231,8 +231,11 @@ def run_sweep(args) -> int:
             executor.shutdown(cancel_futures=True)
     res.settings["make_train"] = asdict(make_train)
     res.settings["test_files"] = [str(p) for p in args.test]
-    res.to_csv(out / "sweep.csv")
     md = res.to_markdown()
+    if args.select is not None:
+        res.settings["select_file"] = str(args.select)
+        md += "\n" + honest_choice(res, args.select)
+    res.to_csv(out / "sweep.csv")
     atomic_write(out / "sweep.md", lambda fh: fh.write(md.encode()))
     atomic_write(out / "settings.json", lambda fh: fh.write(json.dumps(res.settings, indent=1).encode()))
     res.plot(out / "sweep.png")
@@ -240,6 +243,26 @@ def run_sweep(args) -> int:
     result(f"wrote {out / 'sweep.csv'}, {out / 'sweep.md'}, {out / 'sweep.png'} "
            f"({res.settings['seconds']:.0f} s, {res.settings['resumed_jobs']} sigma_P points reused)")
     return 0
+
+
+SELECT = "select"  # the name of the --select set among the sweep's sets
+
+
+def honest_choice(res, path) -> str:
+    """Markdown: per model, the sigma_P with the best balanced accuracy on the selection
+    set (ties: the smaller sigma_P), and what it scores on every test set."""
+    tests = [t for t in res.test_sets if t != SELECT]
+    lines = [f"**sigma_P chosen on the selection set** ({path}, disjoint from the test sets: no peeking) by balanced "
+             "accuracy, and its scores on the test sets\n",
+             "| model | sigma_P | balanced on the selection set | " + " | ".join(f"balanced on {t}" for t in tests) + " |",
+             "|---" * (3 + len(tests)) + "|"]
+    for m in res.models:
+        b = res.best(m, SELECT, "balanced_accuracy")
+        scores = [next(r["balanced_accuracy"] for r in res.rows if r["model"] == m and r["test_set"] == t
+                       and r["sigma_p"] == b["sigma_p"]) for t in tests]
+        lines.append(f"| {m} | {b['sigma_p']:.2f} | {100 * b['balanced_accuracy']:.1f} | "
+                     + " | ".join(f"{100 * s:.1f}" for s in scores) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def _sweep_interrupted(args) -> str:
@@ -259,6 +282,10 @@ def add_sweep(sub, parents, help):
     p.add_argument("--test", type=_paths, required=True, metavar="FILES",
                    help="comma-separated measured test files (e.g. old.npz,new.npz), 400-bin profiles + labels")
     p.add_argument("--out", type=Path, required=True, help="output folder (created if needed)")
+    p.add_argument("--select", type=Path, default=None, metavar="FILE",
+                   help="measured selection set disjoint from the test files (e.g. more acquisitions of the "
+                        "calibration drones): sigma_P is also chosen on it, the honest choice, and its test "
+                        "scores are reported (default: none; the published pick on each test set peeks)")
     p.add_argument("--sigma-p", type=sigma_list, default=list(PUBLISHED_SIGMA_PS), metavar="LIST",
                    help="comma-separated sigma_P grid, each in [0, 1] (default: the published "
                         f"{','.join(f'{s:g}' for s in PUBLISHED_SIGMA_PS)})")

@@ -5,8 +5,9 @@
 * the global options (``--threads``, ``--quiet``), accepted before and after the verb;
 * option groups shared by several verbs: nuisances/acquisition (augment, sweep),
   the radar chain (process, simulate), classifiers (train, sweep, baseline);
-* checks run before any work: outputs writable, inputs readable and sensible,
-  memory enough.
+* checks run before any work: inputs readable and sensible, and the one bound of
+  every size option (:func:`check_size`: memory and time, naming the option); the
+  one output guard is :func:`.guard.check_paths`.
 
 Nothing heavy is imported at module level: ``mdaug --help`` stays fast.
 """

@@ -336,14 +336,36 @@ def test_baseline_says_what_it_trained_on(d, tmp_path, capsys):
     assert "all 20 profiles" not in out
 
 
-def test_sweep_says_its_pick_peeks(d, tmp_path, capsys):
+def test_sweep_says_its_pick_peeks_and_chooses_on_a_selection_set(d, tmp_path, capsys):
     from mdaug.cli import main
 
-    assert main(["sweep", "--test", f"{d}/m.npz", "--sigma-p", "0", "--models", "nb", "--n-per-class", "10",
+    assert main(["sweep", "--test", f"{d}/m.npz", "--sigma-p", "0,0.3", "--models", "nb", "--n-per-class", "10",
                  "--n-boot", "0", "--out", str(tmp_path / "sw")]) == 0
     out = capsys.readouterr().out
     assert "picked on each test set itself" in out and "peeks" in out and "selection set" in out
     assert "peeks" in (tmp_path / "sw" / "sweep.md").read_text()
+    assert "chosen on the selection set" not in out
+    assert main(["sweep", "--test", f"{d}/m.npz", "--select", f"{d}/param_row.npz", "--sigma-p", "0,0.3", "--models",
+                 "nb", "--n-per-class", "10", "--n-boot", "0", "--out", str(tmp_path / "sw2")]) == 2  # a bad file
+    capsys.readouterr()
+    atomic_savez(tmp_path / "sel.npz", profiles=_profiles(), labels=LABELS)
+    assert main(["sweep", "--test", f"{d}/m.npz", "--select", str(tmp_path / "sel.npz"), "--sigma-p", "0,0.3",
+                 "--models", "nb", "--n-per-class", "10", "--n-boot", "0", "--out", str(tmp_path / "sw3")]) == 0
+    out = capsys.readouterr().out
+    table = out[out.index("chosen on the selection set"):]
+    row = next(ln for ln in table.splitlines() if ln.startswith("| nb |"))
+    import json as _json
+
+    rows = [r for r in (tmp_path / "sw3" / "sweep.csv").read_text().splitlines()[1:]]
+    assert "sel.npz" in table and len(rows) == 2 * 2  # two sigma_P x (the test set + the selection set)
+    settings = _json.loads((tmp_path / "sw3" / "settings.json").read_text())
+    assert settings["select_file"].endswith("sel.npz")
+    assert row.count("|") == 5
+    import csv as _csv
+
+    sel = [r for r in _csv.DictReader((tmp_path / "sw3" / "sweep.csv").open()) if r["test_set"] == "select"]
+    best = max(sel, key=lambda r: (float(r["balanced_accuracy"]), -float(r["sigma_p"])))
+    assert row.split("|")[2].strip() == f"{float(best['sigma_p']):.2f}"  # the pick is the selection set's best
 
 
 def test_calibrate_summary_has_units(tiny_posterior):

@@ -41,7 +41,7 @@ def _files(args, dests) -> list[str]:
     return out
 
 
-INPUTS = ("measured", "raw", "data", "model", "test", "fit", "posterior", "config")
+INPUTS = ("measured", "raw", "data", "model", "test", "select", "fit", "posterior", "config")
 OUTPUTS = ("out", "out_set", "plot", "corner", "trace", "json")
 
 
