@@ -150,8 +150,9 @@ def check_paths(inputs=(), outputs=()) -> None:
     for k, (o_opt, o_path, o_id) in enumerate(ids_out):
         for i_opt, i_path, i_id in ids_in:
             if _same(o_id, i_id):
-                raise _error(f"{shown(o_path)}: {o_opt} would overwrite the input {i_opt} {shown(i_path)} (the same "
-                             "file); choose another output path")
+                sep = "" if i_opt.endswith("=") else " "  # --fit HELI=p.nc
+                raise _error(f"{shown(o_path)}: {o_opt} would overwrite the input {i_opt}{sep}{shown(i_path)} (the "
+                             "same file); choose another output path")
         for o2_opt, o2_path, o2_id in ids_out[:k]:
             if _same(o_id, o2_id):
                 raise _error(f"{shown(o_path)}: {o_opt} and {o2_opt} {shown(o2_path)} are the same file; two "

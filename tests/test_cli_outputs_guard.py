@@ -62,7 +62,7 @@ GUARD = [
     ("process-out-is-second-raw", ["process", "{d}/raw.npz", "{d}/raw2.npz", "--out", "{d}/raw2.npz"],
      ["raw2.npz: --out would overwrite the input RAW {d}/raw2.npz"]),
     ("augment-out-is-fit", ["augment", "--fit", "HELI={d}/post.nc", "--out", "{d}/post.nc"],
-     ["{d}/post.nc: --out would overwrite the input --fit HELI= {d}/post.nc"]),
+     ["{d}/post.nc: --out would overwrite the input --fit HELI={d}/post.nc"]),
     ("augment-plot-is-posterior", ["augment", "--posterior", "HELI={d}/post.nc", "--out", "{o}/a.npz", "--plot",
                                    "{d}/post.nc"], ["--plot would overwrite the input --posterior HELI="]),
     ("augment-plot-is-out", ["augment", "--out", "{o}/a.npz", "--plot", "{o}/a.npz"],
