@@ -98,13 +98,6 @@ def check_writable(path) -> Path:
     return path
 
 
-def check_outputs(*paths) -> None:
-    """:func:`check_writable` on every given output path (None = not asked for)."""
-    for path in paths:
-        if path is not None:
-            check_writable(path)
-
-
 PER_PROFILE_FIELDS = ("param_row", "specimen", "true_params", "range_m", "range_true_m", "mti_profiles")
 """Optional fields of a profile file with one entry per profile (checked on reading)."""
 
