@@ -120,15 +120,22 @@ def format_metrics(m: dict) -> str:
              f"accuracy          {fmt(m['accuracy'], ci.get('accuracy'))}",
              f"balanced accuracy {fmt(m['balanced_accuracy'], ci.get('balanced_accuracy'))}",
              "per class (recall = the paper's per-class 'precision'):"]
-    for lab, pc in m["per_class"].items():
+    predicted = np.asarray(m["confusion_matrix"]).sum(axis=0)  # per column: how often each class was predicted
+    undefined = False
+    for j, (lab, pc) in enumerate(m["per_class"].items()):
         cc = ci.get("per_class", {}).get(lab, {})
+        never = m["labels"][j] == lab and predicted[j] == 0
+        undefined |= bool(never)
+        precision = "     –" if never else fmt(pc["precision"], cc.get("precision"))
         lines.append(f"  {lab:>8s} n={pc['n']:<5d} recall {fmt(pc['recall'], cc.get('recall'))}"
-                     f"  precision {fmt(pc['precision'], cc.get('precision'))}")
+                     f"  precision {precision}")
     width = max(len(lab) for lab in m["labels"])
     lines.append("confusion matrix (rows true, columns predicted):")
     lines.append(" " * (width + 2) + " ".join(f"{lab:>{max(width, 6)}s}" for lab in m["labels"]))
     for lab, row in zip(m["labels"], m["confusion_matrix"]):
         lines.append(f"  {lab:>{width}s} " + " ".join(f"{v:>{max(width, 6)}d}" for v in row))
+    if undefined:
+        lines.append("precision – = undefined: the class is never predicted")
     if ci:
         lines.append(f"[..] = {ci['level']:.0%} bootstrap intervals ({ci['n_boot']} resamples)")
     return "\n".join(lines)

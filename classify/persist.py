@@ -72,8 +72,15 @@ def save_model(model: ProfileClassifier, path) -> Path:
 
 
 def _read_archive(path: Path) -> tuple[dict, bytes]:
+    if path.is_dir():
+        raise DataFileError(f"{path}: is a folder, not a model file")
     if not path.is_file():
         raise DataFileError(f"{path}: model file not found")
+    try:
+        with open(path, "rb"):
+            pass
+    except OSError as exc:
+        raise DataFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
     if not zipfile.is_zipfile(path):
         raise DataFileError(f"{path}: not an mdaug model file (expected a ZIP archive written by "
                             f"'mdaug train' / save_model)")
@@ -135,11 +142,60 @@ def _restore(model: ProfileClassifier, meta: dict, blob: bytes) -> None:
         model.best_epoch_ = meta.get("best_epoch")
 
 
+WEIGHTS = {"svm": "model.skops", "nb": "model.skops", "xgb": "model.ubj", "cnn": "model.pt"}
+"""The weights member each kind writes."""
+CNN_FEATURES = 400  # the CNN's 1 x 20 x 20 input
+
+
+def _check_meta(meta: dict) -> None:
+    """meta.json's fields must agree with each other (DataFileError naming the field)."""
+    kind = meta["kind"]
+    if kind not in WEIGHTS:
+        raise DataFileError(f"meta.json field 'kind' = {kind!r}; expected one of {sorted(WEIGHTS)}")
+    if meta["weights"] != WEIGHTS[kind]:
+        raise DataFileError(f"meta.json field 'weights' = {meta['weights']!r} disagrees with field 'kind' = "
+                            f"{kind!r} (which writes {WEIGHTS[kind]!r})")
+    classes = meta["classes"]
+    if (not isinstance(classes, list) or len(classes) < 2 or not all(isinstance(c, str) and c for c in classes)
+            or len(set(classes)) != len(classes)):
+        raise DataFileError(f"meta.json field 'classes' = {classes!r}; expected 2 or more distinct class names")
+    n = meta["n_features"]
+    if isinstance(n, bool) or not isinstance(n, int) or n < 2:
+        raise DataFileError(f"meta.json field 'n_features' = {n!r}; expected an integer >= 2 (profile bins)")
+    if kind == "cnn" and n != CNN_FEATURES:
+        raise DataFileError(f"meta.json field 'n_features' = {n} disagrees with field 'kind' = 'cnn' (a "
+                            f"{CNN_FEATURES}-bin input)")
+    if not isinstance(meta["params"], dict):
+        raise DataFileError("meta.json field 'params' is not a table")
+    norm = meta["params"].get("normalisation")
+    if "normalisation" in meta and norm is not None and meta["normalisation"] != norm:
+        raise DataFileError(f"meta.json field 'normalisation' = {meta['normalisation']!r} disagrees with "
+                            f"params.normalisation = {norm!r}")
+
+
+def _check_restored(model: ProfileClassifier, meta: dict) -> None:
+    """The restored weights must have the classes and inputs meta.json states."""
+    est = getattr(model, "estimator_", None)
+    if est is None:
+        return
+    n_in = getattr(est, "n_features_in_", None)
+    if model.name == "xgb":
+        n_in = est.get_booster().num_features()
+    n_cls = len(getattr(est, "classes_", ())) or None
+    if n_in is not None and int(n_in) != model.n_features_in_:
+        raise DataFileError(f"the weights take {int(n_in)}-bin profiles but meta.json field 'n_features' says "
+                            f"{model.n_features_in_}")
+    if n_cls is not None and n_cls != len(model.classes_):
+        raise DataFileError(f"the weights score {n_cls} classes but meta.json field 'classes' lists "
+                            f"{len(model.classes_)}")
+
+
 def load_model(path) -> ProfileClassifier:
     """Read a classifier written by :func:`save_model` (no code from the file runs)."""
     path = Path(path)
     meta, blob = _read_archive(path)
     try:
+        _check_meta(meta)
         params = dict(meta["params"])
         if "fractions" in params:
             params["fractions"] = tuple(params["fractions"])
@@ -148,6 +204,7 @@ def load_model(path) -> ProfileClassifier:
         model.n_features_in_ = int(meta["n_features"])
         model.train_seconds_ = meta.get("train_seconds")
         _restore(model, meta, blob)
+        _check_restored(model, meta)
     except DataFileError as exc:
         raise DataFileError(f"{path}: {exc}") from None
     except Exception as exc:  # each library raises its own types for bad bytes

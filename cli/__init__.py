@@ -8,7 +8,9 @@ Modules, one per group of verbs (each defines its verbs once, in ``VERBS``):
 * :mod:`.classify`: ``train``, ``evaluate``, ``sweep``, ``baseline``;
 * :mod:`.study`: ``run``;
 * :mod:`.common`: what several verbs share (argument types, the global options,
-  option groups, checks before any work).
+  option groups, checks before any work, the size bound);
+* :mod:`.guard`: the one output guard every verb calls first (no output may be an
+  input or another output, formats, folders, UTF-8 names).
 
 ``--threads`` and ``--quiet`` are accepted before and after the verb. Every bad input
 ends in one line ``mdaug VERB: error: ...`` naming the file and field, or the option,
@@ -77,6 +79,11 @@ def _find_verb(argv: list[str]) -> str | None:
 
 
 def _one_line(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:  # name the path, once
+        from .guard import shown
+
+        extra = f" -> {shown(exc.filename2)}" if exc.filename2 is not None else ""
+        return f"{shown(exc.filename)}{extra}: {exc.strerror}"
     return " ".join(str(exc).split()) or type(exc).__name__
 
 

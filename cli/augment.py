@@ -13,8 +13,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import (SIGN_POLICIES, acquisition_from_args, acquisition_given, add_acquisition_options, add_verb,
-                     class_list, info, nonneg_float, positive_int, result, seed_int, unit_fraction, warn)
+from .common import (SAMPLES, SECONDS_CHAIN_RAMP, SECONDS_FAST_RAMP, SIGN_POLICIES, acquisition_from_args,
+                     acquisition_given, add_acquisition_options, add_verb, check_size, class_list, info, nonneg_float,
+                     positive_int, result, seed_int, unit_fraction, warn)
 
 DEFAULT_CLASSES = ("HELI", "QUAD")
 DEFAULT_SIGMA_P = 0.2
@@ -27,8 +28,9 @@ def posterior_arg(text: str) -> tuple[str, Path]:
     return name.strip().upper(), Path(path.strip())
 
 
-def augmenters_from_args(args) -> tuple[list, dict | None]:
-    """The augmenters the options ask for, and the settings they add to the file."""
+def augmenters_from_args(args) -> tuple[list, dict | None, list[str]]:
+    """The augmenters the options ask for, the settings they add to the file, and the
+    warnings to print once every check has passed."""
     from ..generator import Renderer, SigmaPSource, SpecimenSource, SpecimenSpread
     from ..generator.augment import ModelAugmenter
 
@@ -51,14 +53,14 @@ def augmenters_from_args(args) -> tuple[list, dict | None]:
             source = SpecimenSource(source, specimens)
         return ModelAugmenter(source, renderer(acq))
 
-    augs, extra = [], {}
+    augs, extra, warnings = [], {}, []
     if names:
         from ..inference.posterior_augment import PosteriorSource, load_posterior
 
         for cls, path in fits + posts:
             post = load_posterior(path, cls)
             if not post.converged:
-                warn("augment", f"posterior of {cls} ({path}) did not converge: {post.diagnostics['reason']}")
+                warnings.append(f"posterior of {cls} ({path}) did not converge: {post.diagnostics['reason']}")
             acq, perturb = acquisition_from_args(args, post.measured_acquisition())
             if (cls, path) in fits:
                 src = SigmaPSource(post.best_fit, sigma_p, sign_policy=args.sign_policy, perturb_phases=perturb,
@@ -77,19 +79,38 @@ def augmenters_from_args(args) -> tuple[list, dict | None]:
     if specimens is not None:
         extra["specimens"] = specimens.to_dict()
     extra["acquisition_from"] = "options" if acquisition_given(args) else ("calibration" if names else "default")
-    return augs, extra
+    return augs, extra, warnings
+
+
+def check_augment_sizes(args, augmenters) -> None:
+    """The ramps (the chain's included) and the counts against memory and time."""
+    n = ("--n-per-class", args.n_per_class, 16000)
+    for aug in augmenters:
+        acq, e = aug.renderer.acquisition, aug.n_engines
+        ramps = ("--ramps", acq.ramps, 32)
+        if args.through_chain:
+            frames = ("--mti-depth (+ 1 frames)", acq.mti_depth + 1, 11)
+            check_size(ramps, frames, bytes_each=e * SAMPLES * 8 * 4, what="ramp frames of one profile")
+            check_size(n, ramps, frames, seconds_each=e * SECONDS_CHAIN_RAMP / 11, what=f"{aug.label} ramp frames")
+        else:
+            check_size(n, ramps, seconds_each=e * SECONDS_FAST_RAMP, what=f"{aug.label} rendered ramps")
 
 
 def run_augment(args) -> int:
     import time
 
     from ..generator.dataset import check_dataset_memory, make_dataset, save_dataset
-    from ..radar import check_outputs
     from ..radar.progress import progress_enabled
+    from .guard import Output, check_paths
 
-    check_outputs(args.out, args.plot)
-    augmenters, extra = augmenters_from_args(args)
+    check_paths(inputs=[(f"--{opt} {cls}=", path) for opt in ("fit", "posterior")
+                        for cls, path in (getattr(args, opt) or [])],
+                outputs=[Output("--out", args.out, "npz"), Output("--plot", args.plot, "plot")])
+    augmenters, extra, warnings = augmenters_from_args(args)
     check_dataset_memory(augmenters, args.n_per_class, what="--n-per-class")
+    check_augment_sizes(args, augmenters)
+    for text in warnings:
+        warn("augment", text)
     info(f"synthesising {args.n_per_class:,} profiles per class of {', '.join(a.label for a in augmenters)}")
     t0 = time.perf_counter()
     ds = make_dataset(augmenters, args.n_per_class, args.seed, extra_settings=extra,

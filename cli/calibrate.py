@@ -2,16 +2,18 @@
 
 Exit status: 0 when the sampler converged, 3 when it did not (the posterior is still
 written, flagged not converged in the file and on stderr) unless
-``--allow-unconverged`` is given, 2 on bad input, 130 when interrupted (the chain
-checkpoint is kept: the same command resumes).
+``--allow-unconverged`` is given, 2 on bad input, 130 when interrupted (the fit and
+the chain checkpoint, where they exist yet, are kept: the same command resumes; the
+message says which exist).
 """
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from .common import (acquisition_from_args, acquisition_given, add_acquisition_options, add_verb, info,
-                     positive_float, positive_int, result, seed_int, warn)
+from .common import (BYTES_SPECTRUM, SECONDS_LIKELIHOOD_RAMP, acquisition_from_args, acquisition_given,
+                     add_acquisition_options, add_verb, check_size, count_2, info, positive_float, positive_int, result,
+                     seed_int, warn)
 
 EXIT_NOT_CONVERGED = 3
 
@@ -48,16 +50,56 @@ def _backend(args) -> Path:
     return args.backend if args.backend is not None else Path(f"{args.out}.chain.h5")
 
 
+ENGINE_CANDIDATES = (1, 2, 4)  # --engines auto: what mdaug.inference.compare.select_engines tries
+
+
+def _checkpoint_files(args) -> list[Path]:
+    """Every file the chain checkpoint may consist of: the backend, the fit saved beside
+    it, and with ``--engines auto`` one of each per engine count."""
+    backend = _backend(args)
+    stems = [backend] + ([Path(f"{backend}.e{e}") for e in ENGINE_CANDIDATES] if args.engines == "auto" else [])
+    return [p for s in stems for p in (s, Path(f"{s}.fit.json"))]
+
+
+def check_calibrate_sizes(args, settings, n_measurements: int) -> None:
+    """The fit's and the sampler's sizes against memory and time (before any work)."""
+    from ..generator import load_reference
+
+    engines = args.engines if isinstance(args.engines, int) else max(ENGINE_CANDIDATES) \
+        if args.engines == "auto" else load_reference(args.class_name.upper()).n_engines
+    dim = 13 * engines + 3 * n_measurements
+    draws = ("--draws", settings.n_acquisitions, 16)
+    ramps = ("--ramps-drawn", settings.ramps_drawn, 16)
+    check_size(draws, ramps, bytes_each=engines * BYTES_SPECTRUM * 2, what="simulated ramps per evaluation")
+    evaluation = n_measurements * engines * SECONDS_LIKELIHOOD_RAMP * settings.n_acquisitions * settings.ramps_drawn
+    check_size(("--starts", settings.n_starts, 4), ("--fit-budget", settings.fit_budget, 1500),
+               seconds_each=evaluation, what="likelihood evaluations of the fit")
+    walkers = ("--walkers", settings.n_walkers or max(32, 2 * dim + 2), 2 * dim + 2)
+    check_size(walkers, seconds_each=evaluation, what="likelihood evaluations of one sampler step")
+    if settings.max_steps is not None:  # the step cap also sets how sparsely the chain is stored
+        check_size(("--max-steps", settings.max_steps, 10000), walkers, seconds_each=evaluation,
+                   what="likelihood evaluations of the sampler")
+    if settings.n_particles:
+        check_size(("--particles", settings.n_particles, 40 * dim), seconds_each=evaluation * 10,
+                   bytes_each=dim * 8 * 8, what="particles over the first tempering stage")
+    if settings.time_budget is not None:
+        check_size(("--time-budget", settings.time_budget, 1200), seconds_each=1.0, what="seconds")
+
+
 def run_calibrate(args) -> int:
     import numpy as np
 
     from ..inference.calibrate import calibrate
     from ..inference.settings import CalibrationSettings
-    from ..radar import DataFileError, RadarConfig, check_outputs, load_profiles
+    from ..radar import DataFileError, RadarConfig, load_profiles
     from ..radar.progress import progress_enabled
+    from .guard import Output, check_paths
 
     backend = _backend(args)
-    check_outputs(args.out, args.corner, args.trace, backend)
+    check_paths(inputs=[("MEASURED", args.measured)],
+                outputs=[Output("--out", args.out, "posterior"), Output("--corner", args.corner, "plot"),
+                         Output("--trace", args.trace, "plot"),
+                         Output("--backend", backend, "checkpoint", beside=_checkpoint_files(args)[1:])])
     radar = RadarConfig()
     data = load_profiles(args.measured)
     cls = args.class_name.upper() if args.class_name.upper() in data.classes else args.class_name
@@ -89,6 +131,7 @@ def run_calibrate(args) -> int:
               f"as {args.measured} states it" if from_file is not None else "the published single chirp (default)")
     settings = base.replace(threads=args.threads, progress=progress_enabled(),
                             range_offset=not args.no_range_offset, **overrides)
+    check_calibrate_sizes(args, settings, len(profiles))
     info(f"calibrating {args.class_name.upper()} from {len(profiles)} profile(s) of {args.measured} "
          f"(engines {args.engines or 'reference'}, seed {args.seed}; chain checkpoint {backend})")
     result(f"acquisition ({source}): {acquisition.describe()}")
@@ -115,8 +158,8 @@ def run_calibrate(args) -> int:
         res.plot_trace(args.trace)
         result(f"wrote {args.trace}")
     if args.backend is None:  # the default checkpoint is captured in the NetCDF now
-        for p in backend.parent.glob(backend.name + "*"):
-            p.unlink()
+        for p in _checkpoint_files(args):  # only the files calibrate itself wrote, never a glob
+            p.unlink(missing_ok=True)
     if not res.converged:
         warn("calibrate", f"the chain did not converge ({res.diagnostics['reason']}); {args.out} is flagged "
                           "not converged")
@@ -125,7 +168,15 @@ def run_calibrate(args) -> int:
 
 
 def _interrupted(args) -> str:
-    return f"the chain checkpoint {_backend(args)} is kept; run the same command again to resume"
+    """What an interrupt leaves, as it is: the checkpoint files that exist now."""
+    kept = [p for p in _checkpoint_files(args) if p.exists()]
+    if not kept:
+        return ("no chain checkpoint was written yet (interrupted before the fit finished); nothing to resume: "
+                "run the same command again to start over")
+    if not any(p.suffix != ".json" for p in kept):
+        return (f"the global fit is kept in {', '.join(map(str, kept))} (no sampler steps yet); run the same "
+                "command again to reuse it")
+    return f"the chain checkpoint {', '.join(map(str, kept))} is kept; run the same command again to resume"
 
 
 def add_calibrate(sub, parents, help):
@@ -181,7 +232,7 @@ def add_calibrate(sub, parents, help):
                    help="auto: marginalise the phases when the acquisition randomises them or averages ramps "
                         "(a Gaussian synthetic likelihood), fit them for the published single chirp; or force "
                         f"one (default: {d.likelihood})")
-    g.add_argument("--draws", type=positive_int, default=None, metavar="O",
+    g.add_argument("--draws", type=count_2, default=None, metavar="O",
                    help=f"marginal likelihood: simulated acquisitions per evaluation (default: {d.n_acquisitions})")
     g.add_argument("--ramps-drawn", type=positive_int, default=None, metavar="I",
                    help=f"marginal likelihood: ramps simulated per acquisition, at most K (default: {d.ramps_drawn})")

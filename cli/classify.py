@@ -10,15 +10,34 @@ import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from .common import (add_classifier_options, acquisition_from_args, add_acquisition_options, add_verb, check_out_folder,
+from .common import (SECONDS_CNN_PROFILE, SECONDS_FAST_RAMP, SECONDS_RESAMPLE, SECONDS_TREE_BIN, SECONDS_TSAUG,
+                     add_classifier_options, acquisition_from_args, add_acquisition_options, add_verb, check_size,
                      check_training_memory, class_list, count_2, csv_list, info, load_profile_file, model_list,
                      model_params, nonneg_int, nothing_written, positive_int, result, seed_int, sigma_list)
 
 CNN_BINS = 400  # the CNN's 1 x 20 x 20 input
+SWEEP_FILES = ("sweep.csv", "sweep.md", "settings.json", "sweep.png", "jobs/")
+"""What ``mdaug sweep`` writes in its --out folder."""
 
 
 def _paths(text: str) -> list[Path]:
     return [Path(t) for t in csv_list(text)]
+
+
+def check_training_sizes(args, model: str, n_profiles: int, repeats: int = 1) -> None:
+    """Epochs and trees against time for ``repeats`` trainings on ``n_profiles`` profiles."""
+    if model == "cnn":
+        check_size(("--epochs", args.epochs, 50), seconds_each=n_profiles * repeats * SECONDS_CNN_PROFILE,
+                   what="profile epochs")
+    if model == "xgb":
+        check_size(("--n-estimators", args.n_estimators, 100), seconds_each=n_profiles * repeats * CNN_BINS *
+                   SECONDS_TREE_BIN, what="trees")
+
+
+def check_boot_size(n_boot: int, n_predictions: int) -> None:
+    """Bootstrap resamples against time (``n_predictions`` resampled per resample)."""
+    check_size(("--n-boot", n_boot, 1000), seconds_each=n_predictions * SECONDS_RESAMPLE, bytes_each=200,
+               what="bootstrap resamples")
 
 
 def _check_test(model, test, path):
@@ -31,14 +50,16 @@ def _check_test(model, test, path):
 def run_train(args) -> int:
     from ..classify.models import make_classifier
     from ..classify.persist import save_model
-    from ..radar import DataFileError, check_writable
+    from ..radar import DataFileError
+    from .guard import Output, check_paths
 
-    check_writable(args.out)
+    check_paths(inputs=[("DATA", args.data)], outputs=[Output("--out", args.out, "model")])
     cnn = args.model == "cnn"
     data = load_profile_file(args.data, length=CNN_BINS if cnn else None, why="the CNN (1 x 20 x 20 input)")
     if len(data.classes) < 2:
         raise DataFileError(f"{args.data}: field 'labels' holds only class(es) {data.classes}; training needs "
                             "at least 2")
+    check_training_sizes(args, args.model, len(data))
     model = make_classifier(args.model, random_state=args.seed, **model_params(args, args.model))
     info(f"training {args.model} on {len(data)} profiles x {data.profiles.shape[1]} bins "
          f"({', '.join(data.classes)}) from {args.data}")
@@ -72,12 +93,15 @@ def add_train(sub, parents, help):
 def run_evaluate(args) -> int:
     from ..classify.metrics import evaluate, format_metrics, plot_confusion
     from ..classify.persist import load_model
-    from ..radar import atomic_write, check_outputs
+    from ..radar import atomic_write
+    from .guard import Output, check_paths
 
-    check_outputs(args.json, args.plot)
+    check_paths(inputs=[("MODEL", args.model), ("TEST", args.test)],
+                outputs=[Output("--json", args.json, "json"), Output("--plot", args.plot, "plot")])
     model = load_model(args.model)
     test = load_profile_file(args.test)
     x, y = _check_test(model, test, args.test)
+    check_boot_size(args.n_boot, len(y))
     m = evaluate(y, model.predict(x), labels=model.classes_.tolist(), n_boot=args.n_boot, random_state=args.seed)
     result(f"{model.name} model {args.model} on {args.test}")
     result(format_metrics(m))
@@ -139,28 +163,51 @@ class SyntheticTrainSet:
         return ds.profiles, ds.labels
 
 
+def check_sweep_sizes(args, acq, n_test: int) -> None:
+    """Every size of the sweep against memory and time: the synthetic sets (their ramps
+    included), the trainings, the bootstrap, the workers' copies."""
+    from ..generator import load_reference
+
+    cells = len(args.classes) * len(args.sigma_p)
+    engines = max(load_reference(c).n_engines for c in args.classes)
+    n = ("--n-per-class", args.n_per_class, 4000)
+    check_size(n, ("--ramps", acq.ramps, 32), seconds_each=cells * engines * SECONDS_FAST_RAMP,
+               what="rendered ramps")
+    for m in args.models:
+        check_training_sizes(args, m, args.n_per_class, cells)
+    check_boot_size(args.n_boot, n_test * len(args.sigma_p) * len(args.models))
+    check_size(("--workers", args.workers, 1), n, bytes_each=len(args.classes) * CNN_BINS * 8 * 3,
+               what="training profiles held at once")
+    check_size(("--workers", args.workers, 1), bytes_each=300 * 2 ** 20, what="worker processes")
+
+
 def run_sweep(args) -> int:
     from ..classify.protocol import sigma_p_sweep
     from ..generator import load_reference
     from ..radar import DataFileError, RadarConfig, atomic_write
 
-    out = check_out_folder(args.out)
+    from .guard import Output, check_paths
+
+    check_paths(inputs=[*(("--test", p) for p in args.test), ("--select", args.select)],
+                outputs=[Output("--out", args.out, "folder", inside=SWEEP_FILES)])
+    out = Path(args.out)
     for c in args.classes:
         load_reference(c)  # unknown class: fail before any work
     check_training_memory(2 * args.n_per_class, "--n-per-class", args.n_per_class, len(args.classes))
     length = RadarConfig().slice_length
     tests = {}
-    for path in args.test:
+    for path in args.test + ([args.select] if args.select is not None else []):
         ps = load_profile_file(path, length=length, why="the synthetic training set (400-bin signatures)")
         unknown = sorted(set(ps.classes) - set(args.classes))
         if unknown:
             raise DataFileError(f"{path}: field 'labels' holds classes {unknown} that are not trained "
                                 f"(--classes {','.join(args.classes)})")
-        name = path.stem
+        name = SELECT if path is args.select else path.stem
         if name in tests:
             raise ValueError(f"--test: two test files share the name {name!r}; rename one")
         tests[name] = (ps.profiles, ps.labels)
     acq, perturb = acquisition_from_args(args)
+    check_sweep_sizes(args, acq, sum(len(v[1]) for v in tests.values()))
     make_train = SyntheticTrainSet(tuple(args.classes), args.n_per_class, acquisition=acq.to_dict(),
                                    perturb_phases=perturb, normalisation=args.normalisation, dtype=args.dtype,
                                    sign_policy=args.sign_policy)
@@ -184,8 +231,11 @@ def run_sweep(args) -> int:
             executor.shutdown(cancel_futures=True)
     res.settings["make_train"] = asdict(make_train)
     res.settings["test_files"] = [str(p) for p in args.test]
-    res.to_csv(out / "sweep.csv")
     md = res.to_markdown()
+    if args.select is not None:
+        res.settings["select_file"] = str(args.select)
+        md += "\n" + honest_choice(res, args.select)
+    res.to_csv(out / "sweep.csv")
     atomic_write(out / "sweep.md", lambda fh: fh.write(md.encode()))
     atomic_write(out / "settings.json", lambda fh: fh.write(json.dumps(res.settings, indent=1).encode()))
     res.plot(out / "sweep.png")
@@ -193,6 +243,26 @@ def run_sweep(args) -> int:
     result(f"wrote {out / 'sweep.csv'}, {out / 'sweep.md'}, {out / 'sweep.png'} "
            f"({res.settings['seconds']:.0f} s, {res.settings['resumed_jobs']} sigma_P points reused)")
     return 0
+
+
+SELECT = "select"  # the name of the --select set among the sweep's sets
+
+
+def honest_choice(res, path) -> str:
+    """Markdown: per model, the sigma_P with the best balanced accuracy on the selection
+    set (ties: the smaller sigma_P), and what it scores on every test set."""
+    tests = [t for t in res.test_sets if t != SELECT]
+    lines = [f"**sigma_P chosen on the selection set** ({path}, disjoint from the test sets: no peeking) by balanced "
+             "accuracy, and its scores on the test sets\n",
+             "| model | sigma_P | balanced on the selection set | " + " | ".join(f"balanced on {t}" for t in tests) + " |",
+             "|---" * (3 + len(tests)) + "|"]
+    for m in res.models:
+        b = res.best(m, SELECT, "balanced_accuracy")
+        scores = [next(r["balanced_accuracy"] for r in res.rows if r["model"] == m and r["test_set"] == t
+                       and r["sigma_p"] == b["sigma_p"]) for t in tests]
+        lines.append(f"| {m} | {b['sigma_p']:.2f} | {100 * b['balanced_accuracy']:.1f} | "
+                     + " | ".join(f"{100 * s:.1f}" for s in scores) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def _sweep_interrupted(args) -> str:
@@ -212,6 +282,10 @@ def add_sweep(sub, parents, help):
     p.add_argument("--test", type=_paths, required=True, metavar="FILES",
                    help="comma-separated measured test files (e.g. old.npz,new.npz), 400-bin profiles + labels")
     p.add_argument("--out", type=Path, required=True, help="output folder (created if needed)")
+    p.add_argument("--select", type=Path, default=None, metavar="FILE",
+                   help="measured selection set disjoint from the test files (e.g. more acquisitions of the "
+                        "calibration drones): sigma_P is also chosen on it, the honest choice, and its test "
+                        "scores are reported (default: none; the published pick on each test set peeks)")
     p.add_argument("--sigma-p", type=sigma_list, default=list(PUBLISHED_SIGMA_PS), metavar="LIST",
                    help="comma-separated sigma_P grid, each in [0, 1] (default: the published "
                         f"{','.join(f'{s:g}' for s in PUBLISHED_SIGMA_PS)})")
@@ -237,24 +311,45 @@ def add_sweep(sub, parents, help):
 
 
 # ---- baseline -----------------------------------------------------------------------------------
+def check_baseline_sizes(args, data) -> None:
+    """Folds against the data, and the augmented sets and epochs against time."""
+    import numpy as np
+
+    if args.folds is not None:
+        counts = {c: int(np.sum(data.labels == c)) for c in data.classes}
+        few = min(counts, key=counts.get)
+        if args.folds > counts[few]:
+            raise ValueError(f"--folds {args.folds}: {args.data} holds only {counts[few]} profile(s) of class {few}; "
+                             "every fold needs one of each class")
+    trainings = (args.out is not None) + (args.folds or 0) + (args.out_set is not None)
+    n = ("--n-per-class", args.n_per_class, 16000)
+    check_size(n, seconds_each=len(data.classes) * trainings * SECONDS_TSAUG, what="tsaug profiles")
+    check_size(n, ("--epochs", args.epochs, 100), seconds_each=len(data.classes) * trainings * SECONDS_CNN_PROFILE,
+               what="profile epochs")
+
+
 def run_baseline(args) -> int:
     from ..classify.metrics import evaluate, format_metrics
     from ..classify.persist import save_model
     from ..classify.tsaug_baseline import tsaug_baseline, tsaug_cross_validate
-    from ..radar import DataFileError, atomic_write, check_outputs
+    from ..radar import DataFileError, atomic_write
+    from .guard import Output, check_paths
 
     if args.folds is None and args.out is None and args.out_set is None:
         raise ValueError("give --out MODEL (train on all of DATA), --out-set NPZ (write the tsaug training set) "
                          "or --folds K (cross-validate on DATA)")
     if args.test and args.out is None:
         raise ValueError("--test scores the model trained on all of DATA: give --out MODEL too")
-    check_outputs(args.out, args.json, args.out_set)
+    check_paths(inputs=[("DATA", args.data), *(("--test", p) for p in args.test or [])],
+                outputs=[Output("--out", args.out, "model"), Output("--out-set", args.out_set, "npz"),
+                         Output("--json", args.json, "json")])
     data = load_profile_file(args.data, length=CNN_BINS, why="the CNN (1 x 20 x 20 input)")
     if len(data.classes) < 2:
         raise DataFileError(f"{args.data}: field 'labels' holds only class(es) {data.classes}; training needs "
                             "at least 2")
     check_training_memory(args.n_per_class * len(data.classes), "--n-per-class", args.n_per_class,
                           len(data.classes))
+    check_baseline_sizes(args, data)
     tests = {}
     for path in args.test or []:  # read and check every test file before training
         test = load_profile_file(path, length=CNN_BINS, why="the CNN (1 x 20 x 20 input)")
@@ -292,7 +387,9 @@ def run_baseline(args) -> int:
     if args.out is not None:
         model = tsaug_baseline(data.profiles, data.labels, args.n_per_class, args.seed, epochs=args.epochs, **params)
         save_model(model, args.out)
-        result(f"trained the tsaug-baseline CNN on all {len(data)} profiles; wrote {args.out}")
+        n_aug = args.n_per_class * len(data.classes)
+        result(f"trained the tsaug-baseline CNN on {n_aug:,} tsaug-augmented profiles ({args.n_per_class:,} per "
+               f"class) made from the {len(data)} measured profiles of {args.data}; wrote {args.out}")
         for path, test in tests.items():
             x, y = _check_test(model, test, path)
             report[str(path)] = evaluate(y, model.predict(x), labels=model.classes_.tolist(), random_state=args.seed)

@@ -5,8 +5,9 @@
 * the global options (``--threads``, ``--quiet``), accepted before and after the verb;
 * option groups shared by several verbs: nuisances/acquisition (augment, sweep),
   the radar chain (process, simulate), classifiers (train, sweep, baseline);
-* checks run before any work: outputs writable, inputs readable and sensible,
-  memory enough.
+* checks run before any work: inputs readable and sensible, and the one bound of
+  every size option (:func:`check_size`: memory and time, naming the option); the
+  one output guard is :func:`.guard.check_paths`.
 
 Nothing heavy is imported at module level: ``mdaug --help`` stays fast.
 """
@@ -357,25 +358,6 @@ def model_params(args, name: str) -> dict:
 
 
 # ---- checks before any work ------------------------------------------------------------
-def check_out_folder(path, option: str = "--out") -> Path:
-    """A folder to create or reuse: not a file, and its nearest existing parent writable."""
-    from ..radar import DataFileError
-
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise DataFileError(f"{path}: {option} must be a folder, found a file")
-    probe = path
-    while not probe.exists():
-        if probe.parent == probe:
-            break
-        probe = probe.parent
-    if probe.exists() and not probe.is_dir():
-        raise DataFileError(f"{path}: cannot create {option}, {probe} is a file")
-    if not os.access(probe, os.W_OK):
-        raise DataFileError(f"{path}: cannot write {option}, folder {probe} is not writable")
-    return path
-
-
 def load_profile_file(path, *, length: int | None = None, why: str = "", allow_zero: bool = False):
     """Read a measured/synthetic profile file (NPZ, CSV, .mat) and refuse what no verb can
     use: all-zero rows (naming them), or profiles of the wrong length (``why`` says who
@@ -389,6 +371,32 @@ def load_profile_file(path, *, length: int | None = None, why: str = "", allow_z
     if not allow_zero:
         ps.check_no_zero_rows()
     return ps
+
+
+# ---- size bounds ------------------------------------------------------------------------
+# Per-unit costs for the size bounds (radar.memory.check_size): the rates measured on the
+# project machine (1 thread) made about 3 times faster, so that a refused size is out of
+# reach on a faster machine too; a size whose job would still take more than a day is
+# refused in a few milliseconds, before any work.
+SECONDS_FAST_RAMP = 1e-5        # fast path: one ramp of one engine of one profile (measured 30-80 us)
+SECONDS_CHAIN_RAMP = 1.5e-5     # chain path: one ramp of one engine of one profile (measured 45-170 us)
+SECONDS_SCENE_RAMP = 1e-4       # scene simulator + literal chain: one ramp of one frame (measured ~300 us)
+SECONDS_CNN_PROFILE = 2e-5      # CNN: one profile through one epoch
+SECONDS_TREE_BIN = 1e-9         # XGBoost: one tree over one profile bin
+SECONDS_RESAMPLE = 5e-9         # bootstrap: one resampled prediction (measured ~15 ns)
+SECONDS_TSAUG = 5e-6            # tsaug: one augmented profile
+SECONDS_LIKELIHOOD_RAMP = 2e-6  # calibration: one simulated ramp of one engine in one likelihood evaluation
+BYTES_SPECTRUM = 4096 * 16      # one complex 4096-point range spectrum
+CHAIN_ANTENNAS = 8
+SAMPLES = 504
+
+
+def check_size(*factors, bytes_each: float = 0.0, seconds_each: float = 0.0, what: str = "") -> None:
+    """:func:`mdaug.radar.memory.check_size` (the one size bound) for options given as
+    ``(option, value, typical)``; factors whose value is None are left out."""
+    from ..radar.memory import check_size as bound
+
+    bound([f for f in factors if f[1] is not None], bytes_each=bytes_each, seconds_each=seconds_each, what=what)
 
 
 def check_training_memory(n_profiles: int, option: str, n_per_class: int, n_classes: int,

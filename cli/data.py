@@ -4,8 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .common import (DTYPES, add_chain_options, add_verb, chain_from_args, finite_float, float_pair,
-                     info, nonneg_float, nonneg_int, nothing_written, positive_int, result, seed_int)
+from .common import (BYTES_SPECTRUM, CHAIN_ANTENNAS, DTYPES, SAMPLES, SECONDS_SCENE_RAMP, add_chain_options, add_verb,
+                     chain_from_args, check_size, class_list, finite_float, float_pair, info, nonneg_float, nonneg_int,
+                     nothing_written, positive_int, result, seed_int)
 
 SCENE_PHASES = ("fixed", "uniform")  # checked against mdaug.generator.scene.SCENE_PHASES in tests
 
@@ -28,16 +29,38 @@ def scene_from_args(args):
     )
 
 
+def check_simulate_sizes(args, frames: int) -> None:
+    """Every size option of simulate against memory and time (before any work)."""
+    if args.specimens > args.acquisitions:
+        raise ValueError(f"--specimens {args.specimens:,} exceeds --acquisitions {args.acquisitions:,}: every "
+                         "specimen needs at least one acquisition")
+    n_classes = len(args.class_name)
+    acq = ("--acquisitions", args.acquisitions, 100)
+    ramps, frm = ("--ramps", args.ramps, 32), ("--frames", frames, 11)
+    chunk = min(args.acquisitions, 8)  # acquisitions rendered together (generator.scene.CHUNK_ACQ)
+    check_size(ramps, frm, bytes_each=chunk * CHAIN_ANTENNAS * SAMPLES * 8 * 2, what="ramp frames in memory at once")
+    check_size(("--n-angle", args.n_angle, 64), frm, bytes_each=chunk * BYTES_SPECTRUM, what="angle-range images")
+    if args.keep_cubes:
+        check_size(acq, ramps, frm, bytes_each=n_classes * CHAIN_ANTENNAS * SAMPLES * 4, what="stored ramp frames")
+    check_size(acq, ramps, frm, seconds_each=n_classes * SECONDS_SCENE_RAMP, what="simulated ramp frames")
+    clutter = ("--clutter", args.clutter, 10)
+    check_size(clutter, bytes_each=chunk * SAMPLES * 16 * 3 + args.acquisitions * 32, what="clutter scatterers")
+    check_size(acq, clutter, seconds_each=n_classes * CHAIN_ANTENNAS * SAMPLES * 1e-9, what="clutter returns")
+
+
 def run_simulate(args) -> int:
     import time
 
     from ..generator import load_reference
-    from ..generator.scene import simulate_campaign
-    from ..radar import RadarConfig, check_writable
+    from ..generator.scene import save_campaigns, simulate_campaign
+    from ..radar import RadarConfig
+    from ..radar.seeds import child_seed
+    from .guard import Output, check_paths
 
-    check_writable(args.out)
+    check_paths(outputs=[Output("--out", args.out, "npz")])
     radar = RadarConfig()
-    load_reference(args.class_name)  # unknown class: fail before any work
+    for cls in args.class_name:
+        load_reference(cls)  # unknown class: fail before any work
     lo, hi = args.range_m
     if lo <= 0 or hi > radar.max_range_m:
         raise ValueError(f"--range-m {lo:g},{hi:g}: the target range must lie in (0, {radar.max_range_m:.2f}] m "
@@ -45,17 +68,24 @@ def run_simulate(args) -> int:
     frames = radar.mti_depth + 1
     if args.frames is not None and args.frames < frames:
         raise ValueError(f"--frames {args.frames}: the MTI needs at least mti_depth + 1 = {frames} frames")
+    check_simulate_sizes(args, args.frames or frames)
     scene, chain = scene_from_args(args), chain_from_args(args)
-    info(f"simulating {args.acquisitions} {args.class_name.upper()} acquisition(s) of {args.specimens} "
-         f"specimen(s) (seed {args.seed})")
-    t0 = time.perf_counter()
-    camp = simulate_campaign(args.class_name, args.specimens, args.acquisitions, args.seed, scene=scene,
-                             radar=radar, keep_cubes=args.keep_cubes, chain=chain)
-    camp.save(args.out)
+    classes = args.class_name
+    t0, camps = time.perf_counter(), []
+    for cls in classes:  # one class: the seed itself; several: a child seed per class
+        seed = args.seed if len(classes) == 1 else child_seed(args.seed, "simulate", cls)
+        info(f"simulating {args.acquisitions} {cls} acquisition(s) of {args.specimens} specimen(s) (seed {seed})")
+        camps.append(simulate_campaign(cls, args.specimens, args.acquisitions, seed, scene=scene, radar=radar,
+                                       keep_cubes=args.keep_cubes, chain=chain))
+    save_campaigns(args.out, camps)
     took = time.perf_counter() - t0
-    result(f"wrote {args.out}: {len(camp)} simulated {camp.labels[0]} acquisitions of {args.specimens} "
-           f"specimen(s), {camp.profiles.shape[1]}-bin profiles{' + raw cubes' if args.keep_cubes else ''} "
-           f"({len(camp) / took:,.1f} acquisitions/s; {camp.on_target.mean():.0%} on target)")
+    n = sum(len(c) for c in camps)
+    on_target = sum(c.on_target.sum() for c in camps) / n
+    what = (f"{n} simulated {camps[0].labels[0]} acquisitions of {args.specimens} specimen(s)" if len(camps) == 1 else
+            f"{n} simulated acquisitions ({', '.join(f'{len(c)} {c.labels[0]}' for c in camps)}) of "
+            f"{args.specimens} specimen(s) per class")
+    result(f"wrote {args.out}: {what}, {camps[0].profiles.shape[1]}-bin profiles"
+           f"{' + raw cubes' if args.keep_cubes else ''} ({n / took:,.1f} acquisitions/s; {on_target:.0%} on target)")
     return 0
 
 
@@ -68,12 +98,14 @@ def add_simulate(sub, parents, help):
                              "with random phases, yaw, range, azimuth, hover drift, body, clutter, noise and "
                              "12-bit ADC, processed by the published chain. Writes profiles + labels + the true "
                              "parameters + settings (NPZ).")
-    p.add_argument("--class", dest="class_name", required=True, metavar="CLASS",
-                   help="class reference to simulate (HELI or QUAD)")
+    p.add_argument("--class", dest="class_name", type=class_list, required=True, metavar="CLASS[,CLASS]",
+                   help="class reference(s) to simulate: HELI, QUAD, or HELI,QUAD for one file of both classes "
+                        "(each its own campaign from a child of the seed)")
     p.add_argument("--acquisitions", type=positive_int, required=True, metavar="N",
-                   help="acquisitions in total, spread evenly over the specimens")
+                   help="acquisitions per class, spread evenly over the specimens")
     p.add_argument("--specimens", type=positive_int, default=1, metavar="N",
-                   help="drones of the class, each drawn around the reference (default: %(default)s)")
+                   help="drones per class, each drawn around the reference, at most --acquisitions "
+                        "(default: %(default)s)")
     p.add_argument("--seed", type=seed_int, default=0, help="random seed of the whole campaign (default: %(default)s)")
     p.add_argument("--out", type=Path, required=True, help="output NPZ (profiles, labels, truth, settings)")
     p.add_argument("--keep-cubes", action="store_true", help="also store the raw cubes (field 'cubes')")
@@ -121,12 +153,13 @@ def run_process(args) -> int:
 
     import numpy as np
 
-    from ..radar import DataFileError, RadarConfig, atomic_savez, check_writable
+    from ..radar import DataFileError, RadarConfig, atomic_savez
     from ..radar.chain import process_cube
     from ..radar.progress import progress_bar
     from ..radar.raw import read_raw
+    from .guard import Output, check_paths
 
-    check_writable(args.out)
+    check_paths(inputs=[("RAW", p) for p in args.raw], outputs=[Output("--out", args.out, "npz")])
     radar, chain = RadarConfig(), chain_from_args(args)
     raws = []
     for path in args.raw:  # read and check every file before processing any
@@ -139,6 +172,8 @@ def run_process(args) -> int:
             raise DataFileError(f"{path}: field {field!r} is all zeros (no signal was recorded); nothing to "
                                 "process")
         raws.append(raw)
+    frames = max(r.cubes.shape[1] for r in raws)
+    check_size(("--n-angle", args.n_angle, 64), bytes_each=frames * BYTES_SPECTRUM * 2, what="angle-range images")
     cols = {k: [] for k in ("profiles", "labels", "mti_profiles", "range_m", "direction_deg", "peak_db",
                             "n_missing", "frame", "acquisition", "source")}
     t0, n_acq = time.perf_counter(), 0

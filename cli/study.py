@@ -8,7 +8,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .common import add_verb, check_out_folder, format_table, info, positive_int, result, seed_int, warn
+from .common import add_verb, format_table, info, positive_int, result, seed_int, warn
+
+
+WORKER_BYTES = 300 * 2 ** 20  # a worker process with numpy, scikit-learn and torch loaded, at least
+STUDY_FILES = ("report.html", "results.json", "stages/", "data/", "posteriors/", "models/", "figures/")
+"""What ``mdaug run`` writes in its --out folder (subfolders end in /)."""
 
 
 class StageProgress:
@@ -71,14 +76,32 @@ def summary(results: dict) -> str:
     return "\n".join(lines)
 
 
+def check_study_ramps(cfg) -> None:
+    """--ramps against time: the simulated campaign and the synthetic sets render K ramps."""
+    from .common import SECONDS_FAST_RAMP, SECONDS_SCENE_RAMP, check_size
+
+    s, p = cfg.simulation, cfg.protocol
+    frames = 11
+    acquisitions = sum(s.n_calibration + s.n_select + n * (1 + s.large_factor) for n in s.n_new.values())
+    rendered = len(cfg.classes) * (p.cnn_n_per_class + p.sweep_n_per_class * len(p.sigma_p))
+    check_size(("--ramps", s.ramps, 32), seconds_each=acquisitions * frames * SECONDS_SCENE_RAMP
+               + rendered * SECONDS_FAST_RAMP, what="ramps per frame")
+
+
 def run_study(args) -> int:
     from ..reports.config import StudyConfig, load_config
 
-    out = check_out_folder(args.out)
+    from .guard import Output, check_paths
+
+    check_paths(inputs=[("--config", args.config)], outputs=[Output("--out", args.out, "folder", inside=STUDY_FILES)])
+    out = Path(args.out)
     cfg = load_config(args.config) if args.config else StudyConfig()
     if args.seed is not None:
         cfg.seed = args.seed
     if args.workers is not None:
+        from .common import check_size
+
+        check_size(("--workers", args.workers, 1), bytes_each=WORKER_BYTES, what="worker processes")
         cfg.workers = args.workers
     if args.scheduler:
         cfg.scheduler = args.scheduler
@@ -91,7 +114,12 @@ def run_study(args) -> int:
         import dataclasses
 
         cfg.simulation = dataclasses.replace(cfg.simulation, ramps=args.ramps)
+        check_study_ramps(cfg)
     cfg.validate()  # everything checked before the output folder exists
+    data_files = [(f"[data] {group}.{name}", path) for group in ("calibration", "select", "test")
+                  for name, path in (getattr(cfg.data, group) or {}).items()]
+    check_paths(inputs=[("--config", args.config), *data_files],
+                outputs=[Output("--out", out, "folder", inside=STUDY_FILES)])
     from ..reports.study import Study, stage_names
 
     progress = StageProgress(stage_names(cfg))

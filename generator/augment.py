@@ -31,6 +31,7 @@ from .specimens import SpecimenSpread
 
 SIGN_POLICIES = ("reflect", "truncate", "keep")
 DEFAULT_BATCH = 4096
+CHAIN_BAR_AT = 256  # through the chain (about 2-5 ms a profile) a bar from this many profiles on
 
 
 def _check_n(n) -> int:
@@ -82,9 +83,7 @@ class Renderer:
         if self.through_chain:
             from .chain_path import render_through_chain
 
-            res = render_through_chain(x, self.scene_config(), self.radar, random_state=rng)
-            if progress is not None:
-                progress(len(res.profiles))
+            res = render_through_chain(x, self.scene_config(), self.radar, random_state=rng, progress=progress)
             return normalise(res.profiles.astype(np.float64), self.normalisation).astype(self.dtype)
         return render_fast(x, self.acquisition, rng, self.radar, normalisation=self.normalisation, dtype=self.dtype,
                            progress=progress)
@@ -237,7 +236,8 @@ class ModelAugmenter(Augmenter):
         n = _check_n(n)
         rng = self._rng if rng is None else as_generator(rng)
         params = self.source.draw(n, rng)
-        show = progress if progress is not None else (None if n > 4 * DEFAULT_BATCH else False)
+        large = n > (CHAIN_BAR_AT if self.renderer.through_chain else 4 * DEFAULT_BATCH)  # a few seconds of work
+        show = progress if progress is not None else (None if large else False)
         with progress_bar(total=n, desc=f"{self.label} profiles", unit="profile", progress=show, leave=False) as bar:
             out = self.renderer.render(params, np.random.default_rng(seed_sequence(rng)), progress=bar.update)
         return AugmentedBatch(profiles=out, labels=np.full(n, self.label), params=params, settings=self.settings())

@@ -142,7 +142,7 @@ def _check_inputs(x, scene, chain, method, search_bins) -> np.ndarray:
 def render_through_chain(x, scene: SceneConfig = SceneConfig(), radar: RadarConfig = RadarConfig(),
                          chain: ChainConfig = ChainConfig(), random_state=None, method: str = "reduced", *,
                          search_bins: int = SEARCH_BINS, interpolate: bool = True,
-                         chunk_size: int | None = None) -> ChainProfiles:
+                         chunk_size: int | None = None, progress=None) -> ChainProfiles:
     """Profiles of class vectors rendered through the scene simulator and the chain.
 
     x: (n, 13 E) or (13 E,) class vectors, one acquisition per row (the row is the
@@ -156,7 +156,8 @@ def render_through_chain(x, scene: SceneConfig = SceneConfig(), radar: RadarConf
     both on the same draws; search_bins: the reduced path's detection window, +- FFT
     bins around the true range bin; interpolate: let the reduced path sample the
     target return every 2nd or 4th sample where a derivative bound keeps the 8-point
-    interpolation error <= 3e-5 of its amplitude per sample (False: every sample).
+    interpolation error <= 3e-5 of its amplitude per sample (False: every sample);
+    progress: None or a callable told how many rows each block finished (a bar).
 
     Returns a :class:`ChainProfiles`: profiles (n, slice_length) float32 linear
     magnitude and per-row truth and chain estimates.
@@ -169,8 +170,11 @@ def render_through_chain(x, scene: SceneConfig = SceneConfig(), radar: RadarConf
     noise_seeds = ss_noise.spawn(n)
     if method == "literal":
         out = _literal(d, scene, radar, chain, noise_seeds, chunk_size)
+        if progress is not None:
+            progress(n)
     else:
-        out = _reduced(d, scene, radar, chain, noise_seeds, int(search_bins), chunk_size, bool(interpolate))
+        out = _reduced(d, scene, radar, chain, noise_seeds, int(search_bins), chunk_size, bool(interpolate),
+                       progress)
     units = " (ADC codes)" if scene.quantise and method == "literal" else " (unquantised IF units)"
     settings = {"kind": "mdaug chain path", "method": method, "seed": root.entropy, "n": n,
                 "scene": scene.to_dict(), "radar": radar.to_dict(), "chain": chain.to_dict(),
@@ -251,7 +255,7 @@ def _make_plan(scene, radar, chain, search, decimate=True) -> _Plan:
                  taper=taper, decimate=decimate, rdt=rdt, cdt=cdt)
 
 
-def _reduced(d, scene, radar, chain, noise_seeds, search, chunk_size, interpolate=True) -> dict:
+def _reduced(d, scene, radar, chain, noise_seeds, search, chunk_size, interpolate=True, progress=None) -> dict:
     n = d.x.shape[0]
     plan = _make_plan(scene, radar, chain, search, interpolate)
     if chunk_size is None:
@@ -268,6 +272,8 @@ def _reduced(d, scene, radar, chain, noise_seeds, search, chunk_size, interpolat
             seeds = [noise_seeds[i] for i in sl]
             for key, val in _reduced_block(d, sl, plan, scene, radar, seeds, int(step), work).items():
                 (edge if key == "at_edge" else out[key])[sl] = val
+            if progress is not None:
+                progress(len(sl))
     if edge.any():
         warnings.warn(f"{int(edge.sum())} of {n} profile(s) peak at the edge of the reduced path's search window "
                       f"(true range bin +-{search}): the chain's strongest peak may lie outside; raise search_bins "

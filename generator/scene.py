@@ -350,6 +350,37 @@ class Campaign:
                      acquisition=np.array(json.dumps(acq.to_dict())), **arrays)
 
 
+PER_CLASS = ("true_params", "specimen_params")
+"""Campaign arrays whose width depends on the class (13 x engines): stored per class
+(``true_params_HELI``, ...) in a file of several classes."""
+
+
+def save_campaigns(path, campaigns: list[Campaign]) -> None:
+    """One NPZ of one or several campaigns of different classes (the same scene): the
+    profile-file fields of every campaign concatenated (readable by
+    :func:`mdaug.radar.load_profiles`), the class-width arrays per class
+    (:data:`PER_CLASS`), and settings ``{"classes", "per_class": {class: settings}}``."""
+    if len(campaigns) == 1:
+        return campaigns[0].save(path)
+    names = [c.settings.get("class") for c in campaigns]
+    if len(set(names)) != len(names):
+        raise ValueError(f"save_campaigns: one campaign per class, got classes {names}")
+    acqs = {json.dumps(c.acquisition.to_dict(), sort_keys=True) for c in campaigns}
+    if len(acqs) != 1:
+        raise ValueError("save_campaigns: the campaigns were simulated under different acquisitions")
+    acq = campaigns[0].acquisition
+    arrays = {k: np.concatenate([getattr(c, k) for c in campaigns]) for k in Campaign.ARRAYS if k not in PER_CLASS}
+    for c, name in zip(campaigns, names):
+        for k in PER_CLASS:
+            arrays[f"{k}_{name}"] = getattr(c, k)
+    if all(c.cubes is not None for c in campaigns):
+        arrays["cubes"] = np.concatenate([c.cubes for c in campaigns])
+    settings = {"simulated": True, "kind": "mdaug scene simulation", "classes": names,
+                "per_class": {n: c.settings for n, c in zip(names, campaigns)}}
+    atomic_savez(path, settings=np.array(json.dumps(settings)), ramps_per_frame=np.array(acq.ramps),
+                 acquisition=np.array(json.dumps(acq.to_dict())), **arrays)
+
+
 def scene_acquisition(scene: SceneConfig, radar: RadarConfig = RadarConfig()):
     """The :class:`~.acquisition.Acquisition` a scene's profiles are measured under: its
     ramps, phase treatment, yaw and body return, through the published chain (MTI over

@@ -34,6 +34,8 @@ from .priors import PHASE_NAMES, SHARED, Priors, engine_lines, wrap
 
 FORMAT = "mdaug-posterior-2"
 READABLE_FORMATS = ("mdaug-posterior-1", FORMAT)
+META_FIELDS = ("class_name", "n_engines", "n_measurements", "priors", "diagnostics", "fit", "best_fit")
+"""Fields of the posterior attribute ``mdaug`` every reader needs."""
 IDENTIFIED_RATIO = 0.5  # posterior sd / prior sd above this: "stays near its prior"
 
 _UNITS = {**{f"A_{r}": (f"A_{r} (mm)", 1e3) for r in "abpm"},
@@ -44,6 +46,17 @@ _UNITS = {**{f"A_{r}": (f"A_{r} (mm)", 1e3) for r in "abpm"},
           "offset": ("offset (bins)", 1.0), "carrier": ("carrier (x sum Gamma)", 1.0),
           "noise_db": ("noise floor (dB)", 1.0), "lnsigma": ("ln sigma (noise)", 1.0)}
 """Plot labels with units and the factor from the stored unit (m, rad/s) to the shown one."""
+
+
+SUMMARY_UNITS = {"Gamma": "rel.", "A": "m", "w": "rad/s", "C": "ratio", "phi": "rad", "offset": "bins",
+                 "carrier": "x sum Gamma", "noise_db": "dB", "sigma": "peak = 1"}
+"""Units of the summary table's rows (the stored units: metres, rad/s)."""
+
+
+def summary_unit(row: str) -> str:
+    """The unit of a summary row name such as ``A_a[0]``, ``phi_b[0]@1`` or ``noise_db@2``."""
+    base = row.split("[")[0].split("@")[0]
+    return SUMMARY_UNITS.get(base, SUMMARY_UNITS.get(base.split("_")[0], ""))
 
 
 def import_arviz():
@@ -73,9 +86,77 @@ class CalibrationResult:
             self.meta = json.loads(idata.posterior.attrs["mdaug"])
         except (AttributeError, KeyError, ValueError) as exc:
             raise ValueError("not an mdaug posterior (no 'mdaug' attributes in its posterior group)") from exc
+        if not isinstance(self.meta, dict):
+            raise ValueError("posterior attribute 'mdaug' is not a JSON table")
         if self.meta.get("format") not in READABLE_FORMATS:
             raise ValueError(f"posterior format {self.meta.get('format')!r}; expected one of {READABLE_FORMATS}")
-        self.priors = Priors.from_dict(self.meta["priors"])
+        missing = [k for k in META_FIELDS if k not in self.meta]
+        if missing:
+            raise ValueError(f"posterior attribute 'mdaug' lacks field(s) {missing}")
+        try:
+            self.priors = Priors.from_dict(self.meta["priors"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"posterior attribute 'mdaug' field 'priors' is not a prior table ({exc})") from None
+
+    def check_content(self) -> None:
+        """Refuse (ValueError naming the variable or field) a posterior whose content
+        disagrees with its metadata: a variable missing, of another dtype, dims or
+        size (engines, measurements), NaN or infinite draws, draws outside the prior
+        bounds the file states, a best fit of the wrong length."""
+        meta = self.meta
+        for key in ("n_engines", "n_measurements"):
+            v = meta[key]
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"posterior attribute 'mdaug' field {key!r} = {v!r}: expected an integer >= 1")
+        e, m = self.n_engines, self.n_measurements
+        if not isinstance(meta["diagnostics"], dict) or not {"converged", "reason"} <= set(meta["diagnostics"]):
+            raise ValueError("posterior attribute 'mdaug' field 'diagnostics' lacks 'converged' or 'reason'")
+        best = np.asarray(meta["best_fit"])
+        if best.shape != (e * N_PARAMS,) or not np.issubdtype(best.dtype, np.number) or not np.all(np.isfinite(best)):
+            raise ValueError(f"posterior attribute 'mdaug' field 'best_fit' has shape {best.shape}; expected "
+                             f"{e * N_PARAMS} finite numbers (13 x n_engines = {e})")
+        self.acquisition  # noqa: B018 (parses; its errors name the attribute)
+        per_engine = ("chain", "draw", "engine")
+        per_meas = ("chain", "draw", "measurement")
+        expected = {"Gamma": per_engine, **{n: per_engine for n in SHARED}}
+        if self.marginal:
+            expected.update({n: per_meas for n in ("carrier", "offset", "noise_db")})
+        else:
+            expected.update({n: per_meas + ("engine",) for n in PHASE_NAMES})
+            expected.update({n: per_meas for n in ("offset", "sigma")})
+        if "observed_data" in self.idata.groups() and "y" in self.idata.observed_data:
+            y = self.idata.observed_data["y"]
+            if y.ndim != 2 or y.shape[0] != m:
+                raise ValueError(f"observed_data variable 'y' has shape {y.shape}; expected (measurements, bins) "
+                                 f"with {m} measurements (attribute 'mdaug' field 'n_measurements')")
+        post = self.idata.posterior
+        sizes = {"engine": e, "measurement": m}
+        for name, dims in expected.items():
+            if name not in post.data_vars:
+                raise ValueError(f"posterior variable {name!r} is missing (expected dims {dims}); variables "
+                                 f"present: {sorted(post.data_vars)}")
+            var = post[name]
+            if not np.issubdtype(var.dtype, np.floating):
+                raise ValueError(f"posterior variable {name!r} has dtype {var.dtype}; expected floating point")
+            want = tuple(sizes.get(d) for d in dims)
+            if tuple(var.dims) != dims or any(w is not None and s != w for s, w in zip(var.shape, want)):
+                raise ValueError(f"posterior variable {name!r} has dims {tuple(var.dims)} of shape {var.shape}; "
+                                 f"expected {dims} with engine = n_engines = {e}, measurement = n_measurements = {m} "
+                                 "(attribute 'mdaug')")
+            v = var.values
+            if v.size == 0:
+                raise ValueError(f"posterior variable {name!r} holds no draws")
+            bad = ~np.isfinite(v)
+            if bad.any():
+                idx = tuple(int(i) for i in np.argwhere(bad)[0])
+                raise ValueError(f"posterior variable {name!r} holds NaN or inf (first at index {idx} of "
+                                 f"{tuple(var.dims)})")
+            if name in self.priors.bounds:
+                lo, hi = self.priors.bounds[name]
+                slack = 1e-6 * (hi - lo)
+                if v.min() < lo - slack or v.max() > hi + slack:
+                    raise ValueError(f"posterior variable {name!r} has draws in [{v.min():.6g}, {v.max():.6g}], "
+                                     f"outside its prior bounds [{lo:.6g}, {hi:.6g}] stated in attribute 'priors'")
 
     # ---- identity ----------------------------------------------------------------
     @property
@@ -258,9 +339,12 @@ class CalibrationResult:
         if self.comparison:
             lines.append("engine-count comparison (LOO):")
             lines.append(pd.DataFrame(self.comparison).to_string(index=False))
+        table = self.summary()[["mean", "sd", "q05", "q95", "sd_ratio", "identified"]]
+        table.insert(0, "unit", [summary_unit(n) for n in table.index])
         with pd.option_context("display.width", 140, "display.max_rows", 500):
-            lines.append(self.summary()[["mean", "sd", "q05", "q95", "sd_ratio", "identified"]]
-                         .to_string(float_format=lambda v: f"{v:.4g}"))
+            lines.append(table.to_string(float_format=lambda v: f"{v:.4g}"))
+        lines.append("units: m (amplitudes A), rad/s (angular frequencies w; f = w / 2 pi), rad (phases), "
+                     "ratio (C, carrier x sum Gamma), bins (FFT bins), dB; sd_ratio: posterior sd / prior sd")
         return "\n".join(lines)
 
     # ---- plots -------------------------------------------------------------------------
@@ -414,8 +498,15 @@ class CalibrationResult:
         from ..radar import DataFileError
 
         path = Path(path)
+        if path.is_dir():
+            raise DataFileError(f"{path}: is a folder, not a posterior file")
         if not path.exists():
             raise DataFileError(f"{path}: posterior file not found")
+        try:
+            with open(path, "rb"):
+                pass
+        except OSError as exc:
+            raise DataFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
         az = import_arviz()
         try:
             with warnings.catch_warnings():
@@ -427,8 +518,9 @@ class CalibrationResult:
             raise DataFileError(f"{path}: no 'posterior' group; not an mdaug posterior")
         try:
             res = cls(idata)
+            res.check_content()
         except ValueError as exc:
-            raise DataFileError(f"{path}: {exc}") from exc
+            raise DataFileError(f"{path}: {exc}") from None
         if class_name is not None and res.class_name != class_name.upper():
             raise DataFileError(f"{path}: posterior of class {res.class_name!r}, expected {class_name.upper()!r}")
         if n_engines is not None and res.n_engines != int(n_engines):

@@ -98,12 +98,8 @@ def check_writable(path) -> Path:
     return path
 
 
-def check_outputs(*paths) -> None:
-    """:func:`check_writable` on every given output path (None = not asked for)."""
-    for path in paths:
-        if path is not None:
-            check_writable(path)
-
+PER_PROFILE_FIELDS = ("param_row", "specimen", "true_params", "range_m", "range_true_m", "mti_profiles")
+"""Optional fields of a profile file with one entry per profile (checked on reading)."""
 
 PART_SUFFIX = ".part"
 STALE_SECONDS = 3600.0
@@ -195,6 +191,9 @@ def atomic_path(path):
         yield Path(tmp)
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600 files; give the usual mode
         os.replace(tmp, path)
+    except OSError as exc:  # disk full, quota, read-only file system...: one line naming the target
+        Path(tmp).unlink(missing_ok=True)
+        raise DataFileError(f"{path}: cannot write ({exc.strerror or exc}); nothing was written") from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
@@ -218,12 +217,41 @@ def atomic_savez(path, **arrays) -> Path:
     return atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays))
 
 
+def check_labels(labels, src: str, field: str = "labels") -> np.ndarray:
+    """Class labels as a (N,) unicode array, refusing what is not a vector of text:
+    numbers (they would become class names like '0.0'), bytes that are not UTF-8,
+    a table of more than one column. Errors name the file and field."""
+    arr = np.asarray(labels)
+    what = f"{src}: field {field!r}"
+    if arr.dtype == object:  # MATLAB cell arrays
+        items = [np.squeeze(v) for v in arr.ravel()]
+        if not all(isinstance(v, str) or (isinstance(v, np.ndarray) and v.dtype.kind == "U") for v in items):
+            raise DataFileError(f"{what} must hold text (class names), found other objects")
+        arr = np.array([str(v) for v in items])
+    if arr.dtype.kind == "S":
+        try:
+            arr = np.array([v.decode("utf-8") for v in arr.ravel()]).reshape(arr.shape)
+        except UnicodeDecodeError as exc:
+            raise DataFileError(f"{what} holds bytes that are not UTF-8 text ({exc.reason} at byte {exc.start})") \
+                from None
+    if arr.dtype.kind != "U":
+        raise DataFileError(f"{what} must hold text (class names such as HELI), got dtype {arr.dtype}")
+    if arr.ndim > 1 and sum(s > 1 for s in arr.shape) > 1:
+        raise DataFileError(f"{what} has shape {arr.shape}; expected one label per profile, (N,)")
+    return np.char.strip(arr.ravel())
+
+
 def _check_profiles(profiles, labels, src: str) -> tuple[np.ndarray, np.ndarray]:
-    profiles = as_profile_array(profiles, f"{src}: field 'profiles'", DataFileError).astype(np.float64)
-    labels = np.asarray(labels)
-    if labels.dtype == object:
-        labels = np.array([str(np.squeeze(v)) for v in labels.ravel()])
-    labels = np.char.strip(labels.astype(str).ravel())
+    raw = np.asarray(profiles)
+    if np.iscomplexobj(raw):
+        raise DataFileError(f"{src}: field 'profiles' is complex (dtype {raw.dtype}); expected linear magnitudes "
+                            "(take np.abs first)")
+    profiles = as_profile_array(raw, f"{src}: field 'profiles'", DataFileError)
+    with np.errstate(over="ignore"):
+        profiles = profiles.astype(np.float64)
+    if not np.all(np.isfinite(profiles)):
+        raise DataFileError(f"{src}: field 'profiles' overflows float64 (dtype {raw.dtype})")
+    labels = check_labels(labels, src)
     if labels.shape[0] != profiles.shape[0]:
         raise DataFileError(f"{src}: field 'labels' has {labels.shape[0]} entries for "
                             f"{profiles.shape[0]} profiles")
@@ -233,8 +261,16 @@ def _check_profiles(profiles, labels, src: str) -> tuple[np.ndarray, np.ndarray]
 
 
 def _read_csv(path: Path) -> tuple[np.ndarray, np.ndarray, dict]:
-    with open(path, newline="") as fh:
-        rows = list(csv.reader(fh))
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            rows = list(csv.reader(fh))
+    except UnicodeDecodeError as exc:
+        raise DataFileError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start}); save the CSV as UTF-8") \
+            from None
+    except OSError as exc:
+        raise DataFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    except csv.Error as exc:
+        raise DataFileError(f"{path}: not a readable CSV file ({exc})") from None
     if not rows:
         raise DataFileError(f"{path}: empty CSV file")
     header = [h.strip().lower() for h in rows[0]]
@@ -267,6 +303,8 @@ def _read_mat(path: Path) -> dict:
 def read_arrays(path) -> dict:
     """All arrays of an NPZ or .mat file, loaded without pickle."""
     path = Path(path)
+    if path.is_dir():
+        raise DataFileError(f"{path}: is a folder, not a data file")
     if not path.is_file():
         raise DataFileError(f"{path}: file not found")
     if path.stat().st_size == 0:
@@ -295,6 +333,8 @@ def read_arrays(path) -> dict:
             return out
     except DataFileError:
         raise
+    except OSError as exc:
+        raise DataFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
     except Exception as exc:
         raise DataFileError(f"{path}: not a readable NPZ file ({type(exc).__name__}: {exc})") from None
 
@@ -303,6 +343,8 @@ def load_profiles(path) -> ProfileSet:
     """Read measured or synthetic profiles from NPZ, CSV or .mat (SPEC section 7)."""
     path = Path(path)
     if path.suffix.lower() == ".csv":
+        if path.is_dir():
+            raise DataFileError(f"{path}: is a folder, not a data file")
         if not path.is_file():
             raise DataFileError(f"{path}: file not found")
         profiles, labels, extra = _read_csv(path)
@@ -315,4 +357,32 @@ def load_profiles(path) -> ProfileSet:
         profiles, labels = arrays.pop("profiles"), arrays.pop("labels")
         extra = arrays
     profiles, labels = _check_profiles(profiles, labels, str(path))
+    _check_metadata(extra, labels, str(path))
     return ProfileSet(profiles=profiles, labels=labels, extra=extra, source=str(path))
+
+
+def _check_metadata(extra: dict, labels: np.ndarray, src: str) -> None:
+    """The fields that describe the profiles must agree with them: ``settings`` a JSON
+    table whose ``classes`` (when stated) hold every label, ``param_row`` and the other
+    per-profile fields one entry per profile."""
+    n = len(labels)
+    if "settings" in extra:
+        raw = np.asarray(extra["settings"])
+        try:
+            settings = json.loads(str(raw)) if raw.dtype.kind == "U" and raw.size == 1 else None
+        except ValueError:
+            settings = None
+        if not isinstance(settings, dict):
+            raise DataFileError(f"{src}: field 'settings' is not a JSON table (dtype {raw.dtype}, shape {raw.shape})")
+        classes = settings.get("classes")
+        if isinstance(classes, list):
+            stray = sorted(set(labels.tolist()) - set(map(str, classes)))
+            if stray:
+                raise DataFileError(f"{src}: field 'labels' holds class(es) {stray} that field 'settings' does not "
+                                    f"list (classes {classes}); the file's metadata disagrees with its content")
+    for key in PER_PROFILE_FIELDS:
+        if key in extra:
+            arr = np.asarray(extra[key])
+            if arr.ndim == 0 or arr.shape[0] != n:
+                raise DataFileError(f"{src}: field {key!r} has shape {arr.shape}; expected one entry per profile "
+                                    f"({n})")

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .config import RadarConfig
-from .io import DataFileError, read_arrays
+from .io import DataFileError, check_labels, read_arrays
 
 RAMPS_FIELD_NOTE = "(frames, antennas, samples) or (frames, ramps, antennas, samples)"
 
@@ -51,6 +51,13 @@ def check_cube(cube, source: str, radar: RadarConfig = RadarConfig(), field: str
         idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])  # in the file's own shape
         raise DataFileError(f"{source}: field {field!r} holds NaN or inf (first at index {idx} of shape "
                             f"{arr.shape})")
+    big = np.finfo(np.float32).max if np.issubdtype(arr.dtype, np.floating) else 2 ** 16
+    if np.issubdtype(arr.dtype, np.integer) and arr.dtype.itemsize <= 2:
+        big = None  # int8/int16/uint16 ADC codes
+    if big is not None and np.max(np.abs(arr.astype(np.float64))) >= big:
+        what = "exceed float32" if big != 2 ** 16 else "are not 16-bit ADC codes (|code| >= 65536)"
+        raise DataFileError(f"{source}: field {field!r} holds values that {what} (dtype {arr.dtype}); they would "
+                            "not survive the chain's float32 samples")
     if arr.ndim == 3:
         arr = arr[:, None]
     f, _, a, s = arr.shape
@@ -66,10 +73,7 @@ def check_cube(cube, source: str, radar: RadarConfig = RadarConfig(), field: str
 def _labels(arrays: dict, n: int, source: str) -> np.ndarray | None:
     for key in ("labels", "label"):
         if key in arrays:
-            lab = np.asarray(arrays[key])
-            if lab.dtype == object:
-                lab = np.array([str(np.squeeze(v)) for v in lab.ravel()])
-            lab = np.char.strip(lab.astype(str).ravel())
+            lab = check_labels(arrays[key], source, key)
             if lab.size == 1 and n > 1:
                 lab = np.repeat(lab, n)
             if lab.size != n or np.any(lab == ""):
