@@ -67,40 +67,83 @@ def simulate_measurements(truth: np.ndarray, n_measurements: int, acquisition: A
                            np.random.default_rng(seed))
 
 
-def run_sbc(reference: ClassParams | str = "HELI", n_replicates: int = 100, *, ramps: int = 32,
-            n_measurements: int = 5, settings: CalibrationSettings | None = None, seed=0, n_rank: int = 99,
-            n_bins: int = 5, scene=None, radar: RadarConfig = RadarConfig(), progress=None) -> dict:
-    """Run SBC (module doc). Returns ranks (R, q), names, per-quantity chi-square
-    p-values and outer-10% shares, the pooled p-value and outer share, the share of
-    converged runs, seconds per calibration and the settings."""
+def sbc_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, ramps: int, n_measurements: int,
+                  settings: CalibrationSettings, n_rank: int, scene=None,
+                  radar: RadarConfig = RadarConfig()) -> dict:
+    """One SBC replicate (a truth from the prior, its measurements, a calibration): the
+    ranks of the truth's test quantities among n_rank posterior draws."""
     import time
-
-    from scipy import stats
 
     from .calibrate import calibrate
 
-    ref = load_reference(reference) if isinstance(reference, str) else reference
-    settings = settings or CalibrationSettings()
     acq = Acquisition.measured(ramps)
     layout = Layout(ref.n_engines, n_measurements, Priors.from_reference(ref, radar), marginal=True)
-    ranks, converged, seconds, names = [], [], [], None
-    for i, ss in enumerate(seed_sequence(seed).spawn(n_replicates)):
-        truth_ss, data_ss, run_ss = ss.spawn(3)
-        z, _ = layout.split_theta(layout.sample_prior(1, np.random.default_rng(truth_ss)))
-        truth = layout.shared_physics(z)[0]
-        data = simulate_measurements(truth, n_measurements, acq, data_ss, scene, radar)
-        t0 = time.perf_counter()
-        res = calibrate(data, ref, acquisition=acq, settings=settings, random_state=run_ss, radar=radar)
-        seconds.append(time.perf_counter() - t0)
-        draws = res.draws()
-        pick = np.linspace(0, len(draws) - 1, n_rank).round().astype(int)
-        q_true, names = sbc_quantities(truth)
-        q_draw, _ = sbc_quantities(draws[pick])
-        ranks.append(np.sum(q_draw < q_true, axis=0))
-        converged.append(res.converged)
+    truth_ss, data_ss, run_ss = ss.spawn(3)
+    z, _ = layout.split_theta(layout.sample_prior(1, np.random.default_rng(truth_ss)))
+    truth = layout.shared_physics(z)[0]
+    data = simulate_measurements(truth, n_measurements, acq, data_ss, scene, radar)
+    t0 = time.perf_counter()
+    res = calibrate(data, ref, acquisition=acq, settings=settings, random_state=run_ss, radar=radar)
+    draws = res.draws()
+    pick = np.linspace(0, len(draws) - 1, n_rank).round().astype(int)
+    q_true, names = sbc_quantities(truth)
+    q_draw, _ = sbc_quantities(draws[pick])
+    return {"i": i, "ranks": np.sum(q_draw < q_true, axis=0).tolist(), "names": names,
+            "converged": bool(res.converged), "seconds": time.perf_counter() - t0}
+
+
+def run_sbc(reference: ClassParams | str = "HELI", n_replicates: int = 100, *, ramps: int = 32,
+            n_measurements: int = 5, settings: CalibrationSettings | None = None, seed=0, n_rank: int = 99,
+            n_bins: int = 5, scene=None, radar: RadarConfig = RadarConfig(), progress=None,
+            checkpoint=None, workers: int = 1) -> dict:
+    """Run SBC (module doc). Returns ranks (R, q), names, per-quantity chi-square
+    p-values and outer-10% shares, the pooled p-value and outer share, the share of
+    converged runs, seconds per calibration and the settings.
+
+    checkpoint: a JSON-lines file; every finished replicate is appended to it, and a
+    rerun with the same arguments skips the replicates it holds (resume). workers:
+    replicates run in that many processes (each replicate has its own seed, so the
+    result does not depend on the count)."""
+    import json
+    from concurrent.futures import ProcessPoolExecutor
+    from pathlib import Path
+
+    from scipy import stats
+
+    ref = load_reference(reference) if isinstance(reference, str) else reference
+    settings = settings or CalibrationSettings()
+    key = json.dumps([ref.name, n_replicates, ramps, n_measurements, settings.to_dict(), str(seed), n_rank],
+                     default=str)
+    done: dict[int, dict] = {}
+    path = None if checkpoint is None else Path(checkpoint)
+    if path is not None and path.is_file():
+        for line in path.read_text().splitlines():
+            rec = json.loads(line)
+            if rec.get("key") == key:
+                done[int(rec["i"])] = rec
+    todo = [(i, ss) for i, ss in enumerate(seed_sequence(seed).spawn(n_replicates)) if i not in done]
+
+    def record(rec):
+        done[rec["i"]] = rec
+        if path is not None:
+            with path.open("a") as fh:
+                fh.write(json.dumps({**rec, "key": key}) + "\n")
         if progress:
-            progress(i + 1, n_replicates)
-    ranks = np.array(ranks)
+            progress(len(done), n_replicates)
+
+    args = (ramps, n_measurements, settings, n_rank, scene, radar)
+    if workers > 1 and len(todo) > 1:
+        with ProcessPoolExecutor(workers) as pool:
+            for rec in pool.map(sbc_replicate, [ref] * len(todo), *zip(*todo), *[[a] * len(todo) for a in args]):
+                record(rec)
+    else:
+        for i, ss in todo:
+            record(sbc_replicate(ref, i, ss, *args))
+    recs = [done[i] for i in sorted(done)]
+    names = recs[0]["names"]
+    ranks = np.array([r["ranks"] for r in recs])
+    converged = [r["converged"] for r in recs]
+    seconds = [r["seconds"] for r in recs]
     edges = np.linspace(0, n_rank + 1, n_bins + 1)
     counts = np.stack([np.histogram(ranks[:, j], bins=edges)[0] for j in range(ranks.shape[1])])
     expected = n_replicates / n_bins

@@ -100,7 +100,8 @@ def section_fit(quick):
           "distances in prior widths)")
 
 
-OPTIONS = {"ramps": 32, "sbc_draws": 20, "sbc_ramps": 32, "time_budget": 3600.0}
+OPTIONS = {"ramps": 32, "sbc_draws": 20, "sbc_ramps": 32, "time_budget": 3600.0, "sbc_steps": 3000,
+           "sbc_workers": 1, "sbc_checkpoint": None, "sbc_class": "HELI"}
 
 
 def scene_profiles(cls, ramps, n=5, seed=11):
@@ -182,11 +183,14 @@ def section_sbc(quick):
     from mdaug.inference.sbc import run_sbc
 
     n, k = (2 if quick else OPTIONS["sbc_draws"]), OPTIONS["sbc_ramps"]
-    budget = 30.0 if quick else 300.0
+    steps = 200 if quick else OPTIONS["sbc_steps"]
     print(f"\n== 6. SBC of the supported case: {n} truths from the prior, 5 acquisitions each through the scene "
-          f"simulator and the chain, K = {k}; time budget {budget:g} s per calibration")
+          f"simulator and the chain, K = {k}; at most {steps} steps per calibration; {OPTIONS['sbc_workers']} "
+          f"worker(s); resumable from {OPTIONS['sbc_checkpoint']}")
     t = time.perf_counter()
-    out = run_sbc("HELI", n, ramps=k, settings=CalibrationSettings(time_budget=budget), seed=1, n_rank=49, n_bins=5)
+    out = run_sbc(OPTIONS["sbc_class"], n, ramps=k, settings=CalibrationSettings(max_steps=steps, time_budget=None),
+                  seed=1, n_rank=49, n_bins=5, checkpoint=OPTIONS["sbc_checkpoint"],
+                  workers=OPTIONS["sbc_workers"])
     print(f"  {time.perf_counter() - t:.0f} s ({np.median(out['seconds']):.0f} s per calibration); outer-10% share "
           f"{out['outer_share']:.2f} (honest: 0.10); pooled chi-square p {out['pooled_p']:.3g}; min p "
           f"{out['min_p']:.3g}; converged share {out['converged_share']:.2f}")
@@ -206,9 +210,15 @@ def main():
     ap.add_argument("--time-budget", type=float, default=3600.0, help="calibration budget, s (sections 4-5)")
     ap.add_argument("--sbc-draws", type=int, default=20, help="truths from the prior in section 6")
     ap.add_argument("--sbc-ramps", type=int, default=32, help="K of the SBC's acquisitions (section 6)")
+    ap.add_argument("--sbc-class", default="HELI", help="class of the SBC's truths (section 6)")
+    ap.add_argument("--sbc-steps", type=int, default=3000, help="step cap of each SBC calibration (section 6)")
+    ap.add_argument("--sbc-workers", type=int, default=1, help="SBC replicates run in this many processes")
+    ap.add_argument("--sbc-checkpoint", default=None,
+                    help="JSON-lines file of finished SBC replicates: a rerun resumes from it")
     args = ap.parse_args()
     OPTIONS.update(ramps=args.ramps, time_budget=args.time_budget, sbc_draws=args.sbc_draws,
-                   sbc_ramps=args.sbc_ramps)
+                   sbc_ramps=args.sbc_ramps, sbc_steps=args.sbc_steps, sbc_workers=args.sbc_workers,
+                   sbc_checkpoint=args.sbc_checkpoint, sbc_class=args.sbc_class)
     unknown = [n for n in args.sections.split(",") if n not in SECTIONS]
     if unknown:
         ap.error(f"--sections: unknown {unknown}; choose from {list(SECTIONS)}")
