@@ -228,14 +228,14 @@ def add_calibrate(sub, parents, help):
                         f"{q.fit_budget})")
     g.add_argument("--fit-algorithm", choices=FIT_ALGORITHMS, default=None, metavar="NAME",
                    help=f"nlopt global algorithm, one of {', '.join(FIT_ALGORITHMS)} (default: {d.fit_algorithm})")
-    g.add_argument("--likelihood", choices=("auto", "marginal", "fitted"), default=None,
-                   help="auto: marginalise the phases when the acquisition randomises them or averages ramps "
-                        "(a Gaussian synthetic likelihood), fit them for the published single chirp; or force "
-                        f"one (default: {d.likelihood})")
+    g.add_argument("--likelihood", choices=("auto", "marginal", "synthetic", "fitted"), default=None,
+                   help="auto: marginalise the phases in closed form when the acquisition randomises them or "
+                        "averages ramps, fit them for the published single chirp; or force one (synthetic: the "
+                        f"Monte-Carlo check of the closed form) (default: {d.likelihood})")
     g.add_argument("--draws", type=count_2, default=None, metavar="O",
-                   help=f"marginal likelihood: simulated acquisitions per evaluation (default: {d.n_acquisitions})")
+                   help=f"synthetic likelihood: simulated acquisitions per evaluation (default: {d.n_acquisitions})")
     g.add_argument("--ramps-drawn", type=positive_int, default=None, metavar="I",
-                   help=f"marginal likelihood: ramps simulated per acquisition, at most K (default: {d.ramps_drawn})")
+                   help=f"synthetic likelihood: ramps simulated per acquisition, at most K (default: {d.ramps_drawn})")
     add_acquisition_options(p, relative=False, profile_options=False)
     g = p.add_argument_group("model")
     g.add_argument("--normalisation", choices=NORMALISATIONS, default=None,

@@ -311,7 +311,8 @@ class CalibrationResult:
         lines = [f"class {self.class_name}: {self.n_engines} engine(s), {self.n_measurements} measurement(s), "
                  f"{self.n_draws} posterior draws",
                  f"acquisition: {self.acquisition.describe()}; "
-                 + ("phases marginalised (synthetic likelihood)" if self.marginal else "phases fitted"),
+                 + (f"phases marginalised ({self.meta.get('likelihood', {}).get('likelihood', 'marginal')})"
+                    if self.marginal else "phases fitted"),
                  f"fit ({f['algorithm']}, {len(f['starts_misfit'])} starts, {f['seconds']:.1f} s"
                  f"{', reused from the checkpoint' if d.get('fit_reused') else ''}): "
                  f"misfit {f['misfit']:.2f}, {f['n_agree']} start(s) agree, "

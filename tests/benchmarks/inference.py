@@ -7,6 +7,8 @@ Prints, all with 1 thread:
    Monte Carlo error against the number of simulated acquisitions O and ramps I
    (speed against error; error = rms over bins of the model mean's spread across
    common-random-number seeds, peak = 1);
+3b. the closed-form likelihood's cost per walker-evaluation against the synthetic one in
+   the same run, and its tolerances' speed against error;
 4. HELI from 5 scene-simulated acquisitions at K = 32 (and ``--ramps`` K): time to
    50 tau with min ESS >= 400 (target < 90 s), and the label-free lines' 90%
    intervals against the truth (recovery);
@@ -137,6 +139,51 @@ def section_likelihood(quick):
         print(f"  {o:3d} {i:3d} {1e3 * np.median(secs):14.2f} {err:9.4f}")
 
 
+def section_closed_form(quick):
+    """Cost per walker-evaluation of the closed-form likelihood (5 measurements, 32 walkers a
+    batch, CPU time, min of repeats) against the synthetic likelihood at O = 16, I = 16 in the
+    same run, and its tolerances' speed against error (log-likelihood change from the
+    tightest setting, and the model mean's largest change, peak = 1)."""
+    from mdaug.generator.acquisition import Acquisition, render
+    from mdaug.inference.calibrate import make_likelihood
+    from mdaug.inference.closed_form import ClosedFormLikelihood
+
+    k = OPTIONS["ramps"]
+    reps = 2 if quick else 5
+    print(f"\n== 3b. closed-form likelihood: CPU ms per walker-evaluation (5 measurements, K = {k}, 32 walkers "
+          f"a batch, min of {reps}), against the synthetic likelihood (O = 16, I = 16) in the same run")
+    acq = Acquisition.measured(k)
+    for cls in ("HELI", "QUAD"):
+        ref = load_reference(cls)
+        y, _ = prepare_measured(render(np.repeat(ref.to_array()[None], 5, 0), acq, rng=1, radar=RADAR), RADAR, "peak")
+        ss = np.random.SeedSequence(0)
+        cf = make_likelihood(y, ref, ref.n_engines, acq, CalibrationSettings(), ss)
+        syn = make_likelihood(y, ref, ref.n_engines, acq, CalibrationSettings(likelihood="synthetic"), ss)
+        th_cf = cf.layout.sample_prior(32, np.random.default_rng(2))
+        th_syn = syn.layout.sample_prior(32, np.random.default_rng(2))
+
+        def cost(post, th):
+            post(th[:2])
+            best = np.inf
+            for _ in range(reps):
+                t = time.process_time()
+                post(th)
+                best = min(best, time.process_time() - t)
+            return 1e3 * best / len(th)
+
+        c_cf, c_syn = cost(cf, th_cf), cost(syn, th_syn)
+        print(f"  {cls}: closed form {c_cf:.2f} ms, synthetic {c_syn:.2f} ms (ratio {c_syn / c_cf:.1f}x)")
+        tight = ClosedFormLikelihood(y, cf.layout, acq, RADAR, amp_tol=1e-5, pair_tol=1e-3, reach_tol=1e-5)
+        th = th_cf[:8]
+        ll0, m0 = tight.log_likelihood(th), tight.mean_profiles(th[:2])
+        print(f"    {'amp_tol':>8s} {'pair_tol':>8s} {'reach_tol':>9s} {'ms':>7s} {'|dll| median':>12s} {'mean change':>11s}")
+        for at, pt, rt in ((1e-4, 1e-2, 1e-4), (1e-3, 5e-2, 3e-4), (3e-3, 0.1, 1e-3)):
+            lik = ClosedFormLikelihood(y, cf.layout, acq, RADAR, amp_tol=at, pair_tol=pt, reach_tol=rt)
+            d_ll = np.median(np.abs(lik.log_likelihood(th) - ll0))
+            d_mu = np.max(np.abs(lik.mean_profiles(th[:2]) - m0))
+            print(f"    {at:8.0e} {pt:8.0e} {rt:9.0e} {cost(lik, th_cf):7.2f} {d_ll:12.2f} {d_mu:11.4f}")
+
+
 def _recovery(res, cls):
     from mdaug.inference.priors import engine_lines
 
@@ -199,6 +246,7 @@ def section_sbc(quick):
 
 
 SECTIONS = {"throughput": section_throughput, "fit": section_fit, "likelihood": section_likelihood,
+            "closed_form": section_closed_form,
             "heli": section_heli, "quad": section_quad, "sbc": section_sbc}
 
 
