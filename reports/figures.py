@@ -13,6 +13,7 @@ import re
 
 import numpy as np
 
+from .numbers import decimals
 from .style import (M_TO_MM, PAGE_WIDTH_IN, RAD_S_PER_HZ, REFERENCE_STYLE, colour, figure_style, save)
 
 
@@ -72,8 +73,6 @@ def _ci(m: dict, key: str, cls: str | None = None):
 
 
 def _decimals(ci) -> int:
-    from .report import decimals
-
     return decimals(ci)
 
 
@@ -85,12 +84,16 @@ def _err(v, ci):
     return np.array([[max(v - ci[0], 0.0)], [max(ci[1] - v, 0.0)]])
 
 
-def strategies_figure(results: dict, test: str, chosen: str | None, ceiling: tuple | None):
+def strategies_figure(results: dict, test: str, chosen, ceiling: tuple | None):
     """Balanced accuracy and per-class recall (95% intervals) of every strategy's CNN
-    on set ``test``; chance (0.5 balanced) and the ceiling drawn as lines.
+    on set ``test`` (means over its training runs; the runs as small ticks); chance
+    (0.5 balanced) and the ceiling drawn as lines.
 
+    chosen: the chosen strategy's name, or the names tied on the selection set;
     ceiling: (label, balanced accuracy, [lo, hi]) or None."""
     plt = _plt()
+    chosen = [chosen] if isinstance(chosen, str) else list(chosen or [])
+    mark = " (chosen)" if len(chosen) == 1 else " (tied choice)"
     classes = list(results["config"]["classes"])
     names = [n for n, s in results["strategies"].items() if test in s["tests"]]
     with figure_style():
@@ -102,7 +105,11 @@ def strategies_figure(results: dict, test: str, chosen: str | None, ceiling: tup
             y = len(names) - 1 - row
             b = m["balanced_accuracy"]
             ax.errorbar(b, y + offsets[0], xerr=_err(b, _ci(m, "balanced_accuracy")), fmt="D", color="k",
-                        ms=7, label="balanced accuracy" if row == 0 else None, zorder=4)
+                        ms=7, label="balanced accuracy (mean of the runs)" if row == 0 else None, zorder=4)
+            runs = [r["balanced_accuracy"] for r in m.get("runs") or []]
+            if len(runs) > 1:
+                ax.plot(runs, [y + offsets[0]] * len(runs), "|", color="0.35", ms=13, mew=1.6, zorder=5,
+                        label="balanced accuracy of each run" if row == 0 else None)
             for j, cls in enumerate(classes):
                 r = m["per_class"][cls]["recall"]
                 if r is None:
@@ -115,7 +122,7 @@ def strategies_figure(results: dict, test: str, chosen: str | None, ceiling: tup
             ax.axvline(value, color="0.2", ls=":", lw=1.6, label=f"ceiling: {label}, balanced accuracy")
             if ci:
                 ax.axvspan(ci[0], ci[1], color="0.5", alpha=0.12, lw=0, label="ceiling's 95% interval")
-        ax.set_yticks(range(len(names)), [n + (" (chosen)" if n == chosen else "") for n in reversed(names)])
+        ax.set_yticks(range(len(names)), [n + (mark if n in chosen else "") for n in reversed(names)])
         ax.set_ylim(-0.6, len(names) - 0.4)
         ax.set_xlim(-0.02, 1.02)
         ax.set_xlabel(f"share of the '{test}' set (bars: 95% bootstrap intervals)")
@@ -154,7 +161,9 @@ def confusion_figure(results: dict, test: str):
             ax.grid(False)
             ci = _ci(m, "balanced_accuracy")
             d = _decimals(ci)
-            ax.set_title(f"{name}\nbalanced accuracy\n{m['balanced_accuracy']:.{d}f}"
+            runs = m.get("n_runs") or 1
+            ax.set_title(f"{name}" + (f" ({runs} runs)" if runs > 1 else "") + f"\nbalanced accuracy\n"
+                         f"{m['balanced_accuracy']:.{d}f}"
                          + (f" [{ci[0]:.{d}f}, {ci[1]:.{d}f}]" if ci else ""), fontsize=10)
         for ax in axes.ravel()[len(names):]:
             ax.axis("off")
@@ -319,18 +328,20 @@ def speed_panels(results: dict, test: str | None) -> list[dict]:
         pts = []
         for name, s in results["strategies"].items():
             m = s["tests"].get(test)
-            if m is not None:
-                ci = _ci(m, "balanced_accuracy")
-                pts.append((f"CNN {name}", s["train_seconds"], 1 - m["balanced_accuracy"],
-                            [1 - ci[1], 1 - ci[0]] if ci else None))
+            if m is not None:  # one run's cost; its error: the mean, bars the lowest-highest run
+                runs = m.get("n_runs") or 1
+                lo_hi = (m.get("seed_spread") or {}).get("balanced_accuracy") if runs > 1 else None
+                pts.append((f"CNN {name}", s["train_seconds"] / runs, 1 - m["balanced_accuracy"],
+                            [1 - lo_hi[1], 1 - lo_hi[0]] if lo_hi else None))
         for model, c in ((results.get("ceiling") or {}).get("models") or {}).items():
             m = c["tests"].get(test)
             if m is not None:
-                ci = _ci(m, "balanced_accuracy")
-                pts.append((f"ceiling {model}", c["train_seconds"], 1 - m["balanced_accuracy"],
-                            [1 - ci[1], 1 - ci[0]] if ci else None))
+                runs = m.get("n_runs") or 1
+                lo_hi = (m.get("seed_spread") or {}).get("balanced_accuracy") if runs > 1 else None
+                pts.append((f"ceiling {model}", c["train_seconds"] / runs, 1 - m["balanced_accuracy"],
+                            [1 - lo_hi[1], 1 - lo_hi[0]] if lo_hi else None))
         if pts:
-            panels.append({"stage": "training", "xlabel": "training time (s)",
+            panels.append({"stage": "training", "xlabel": "training time of one run (s)",
                            "ylabel": "1 - balanced accuracy", "metric": f"on '{test}'", "points": pts})
     return panels
 
@@ -388,7 +399,8 @@ def speed_figure(results: dict, test: str | None):
             ax.axhline(0.5, **REFERENCE_STYLE, label="chance")
             _scale(ax, [q[1] for q in train["points"]], "x")
             ax.set_ylim(0, max([0.75] + [(q[3] or [0, q[2]])[1] * 1.1 for q in train["points"]]))
-            ax.set_title(f"training (error {train['metric']}, 95% intervals)", loc="left")
+            ax.set_title(f"training (error {train['metric']}: mean of the runs, bars lowest-highest run)",
+                         loc="left")
             ax.set_xlabel(train["xlabel"])
             ax.set_ylabel(train["ylabel"])
             ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3, fontsize=9)

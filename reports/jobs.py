@@ -110,8 +110,12 @@ def candidate(job: dict) -> dict:
 
 
 def train_and_test(job: dict) -> dict:
-    """Make a strategy's training set, train one classifier, test on every set given."""
+    """One training run: make a strategy's training set (from the run's own seed), train
+    one classifier, predict every set given. Returns the run's predictions (one string of
+    class indices per set, :func:`mdaug.reports.statistics.encode`), not its scores: the
+    study scores all runs of all classifiers on the same resamples."""
     from ..classify import make_classifier, save_model
+    from .statistics import encode
 
     _threads(job.get("threads", 1))
     t0 = time.perf_counter()
@@ -124,8 +128,20 @@ def train_and_test(job: dict) -> dict:
     t_train = time.perf_counter() - t1
     if job.get("model_path"):
         save_model(clf, job["model_path"])
+    classes = sorted(job["classes"])
+    return {"seed": int(job["seed"]), "n_train": int(len(y)), "data_seconds": t_data, "train_seconds": t_train,
+            "epochs_run": (getattr(clf, "split_scores_", None) or {}).get("epochs_run"),
+            "predictions": {name: encode(clf.predict(np.asarray(Xt)), classes)
+                            for name, (Xt, _) in job["tests"].items()}}
+
+
+def combine_runs(job: dict, runs: list[dict]) -> dict:
+    """A strategy's stage result from its training runs (in seed order)."""
     spec = {k: v for k, v in job["spec"].items() if k not in ("profiles", "labels")}
-    return {"strategy": job["name"], "model": job["model"], "n_train": int(len(y)), "spec": spec,
-            "sigma_p": spec.get("sigma_p"), "width": spec.get("width"), "data_seconds": t_data,
-            "train_seconds": t_train,
-            "tests": _evaluate_all(clf, job["tests"], job["classes"], job["n_boot"], job["seed"])}
+    return {"strategy": job["name"], "model": job["model"], "spec": spec, "sigma_p": spec.get("sigma_p"),
+            "width": spec.get("width"), "seeds": [r["seed"] for r in runs],
+            "n_train": int(sum(r["n_train"] for r in runs)),
+            "data_seconds": float(sum(r["data_seconds"] for r in runs)),
+            "train_seconds": float(sum(r["train_seconds"] for r in runs)),
+            "runs": [{k: v for k, v in r.items() if k != "predictions"} for r in runs],
+            "predictions": {t: [r["predictions"][t] for r in runs] for t in runs[0]["predictions"]}}

@@ -1,0 +1,120 @@
+"""The study's training stages: each strategy's CNN (several training runs, stage
+``cnn_<strategy>``) and the separability ceiling (stage ``ceiling``). A mixin of
+:class:`mdaug.reports.study.Study` (it uses the study's config, cache and folder).
+
+Training runs: every CNN is trained ``protocol.cnn_seeds`` times; run ``i`` of a
+strategy draws its own training set and its weights, split and shuffles from
+``child_seed(seed, "cnn", strategy, i)`` (the one seed helper), so runs are
+independent of each other and of the order or process they run in. The stages store
+predictions; :mod:`.statistics` scores them.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..radar.seeds import child_seed
+from . import jobs
+from .cache import settings_key
+
+PARAMETER = {"sigma_p_published": "sigma_p", "sigma_p_fit": "sigma_p", "posterior": None,
+             "posterior_specimens": "width", "tsaug": None}
+"""The setting each strategy's choice is about (None: nothing to choose)."""
+CEILING_MODELS = ("svm", "xgb", "nb", "cnn")
+
+
+class TrainingStages:
+    # ---- stage 5: CNN per strategy, several runs ------------------------------------------------
+    def cnn_jobs(self, specs: dict, choice: dict, select, tests: dict) -> dict[str, list[dict]]:
+        """{strategy: [run job, ...]}: its CNN's training runs at its chosen setting."""
+        p = self.cfg.protocol
+        sel_name, sel_data, _ = select
+        out = {}
+        for name, ss in specs.items():
+            param = PARAMETER[name]
+            spec = ss[0] if param is None else next(s for s in ss if s[param] == choice[name]["value"])
+            tsaug = name == "tsaug"
+            sets = {sel_name: sel_data, **tests}
+            if tsaug:  # tsaug copies the calibration measurements: never scored on them
+                sets = {k: v for k, v in sets.items() if k != "calibration"}
+            out[name] = [{"name": name, "model": "cnn", "classes": list(self.cfg.classes), "spec": spec,
+                          "n_per_class": p.tsaug_n_per_class if tsaug else p.cnn_n_per_class, "tests": sets,
+                          "seed": child_seed(self.cfg.seed, "cnn", name, i),
+                          "model_params": {"epochs": p.tsaug_epochs if tsaug else p.cnn_epochs,
+                                           "patience": p.cnn_patience, "normalisation": p.normalisation},
+                          "model_path": str(self.out / "models" / f"cnn_{name}_run{i}.zip")}
+                         for i in range(p.cnn_seeds)]
+        return out
+
+    def _cnn_key(self, runs: list[dict]) -> str:
+        spec = {k: v for k, v in runs[0]["spec"].items() if k not in ("profiles", "labels")}
+        return settings_key(self.cnn_key, runs[0]["name"], spec, [r["seed"] for r in runs])
+
+    def cnns(self, run_jobs: dict, executor) -> dict:
+        """Every strategy's stage result (cached; uncached runs go to the executor together)."""
+        todo = [(name, job) for name, runs in run_jobs.items()
+                if not self.cache.has(f"cnn_{name}", self._cnn_key(runs)) for job in runs]
+        if len(todo) > 1 and self.cfg.workers > 1:
+            done: dict[str, list] = {}
+            for (name, _), res in zip(todo, executor.map(jobs.train_and_test, [j for _, j in todo])):
+                done.setdefault(name, []).append(res)
+            for name, res in done.items():
+                runs = run_jobs[name]
+                self.cache.store(f"cnn_{name}", self._cnn_key(runs), jobs.combine_runs(runs[0], res),
+                                 sum(r["data_seconds"] + r["train_seconds"] for r in res))
+        return {name: self.cache.run(f"cnn_{name}", self._cnn_key(runs),
+                                     lambda runs=runs: jobs.combine_runs(runs[0], [jobs.train_and_test(j)
+                                                                                    for j in runs]))
+                for name, runs in run_jobs.items()}
+
+    # ---- stage 6: separability ceiling --------------------------------------------------------------
+    def ceiling(self, tests: dict, select) -> dict:
+        """Classifiers trained on the scene simulator's own data (other specimens): the
+        fast models on the whole set, the CNN ``cnn_seeds`` times, each run on its own
+        part of the set (like the strategies' CNNs). Predictions only; scored and chosen
+        (on the selection set) with everything else."""
+        from ..classify import make_classifier
+        from ..generator import load_reference
+        from ..generator.chain_path import render_through_chain
+        from ..generator.scene import SceneConfig, draw_specimens
+        from .statistics import encode
+
+        sim, p = self.cfg.simulation, self.cfg.protocol
+        classes = sorted(self.cfg.classes)
+
+        def compute():
+            scene = SceneConfig(n_ramps=sim.ramps)
+            parts, labels = [], []
+            for c in self.cfg.classes:
+                rng = np.random.default_rng(child_seed(self.cfg.seed, "ceiling", c))
+                specimens = draw_specimens(load_reference(c).to_array(), 2 * sim.new_specimens, scene, rng)
+                x = specimens[np.arange(sim.ceiling_per_class) % len(specimens)]
+                parts.append(render_through_chain(x, scene, random_state=child_seed(self.cfg.seed, "ceiling-chain",
+                                                                                    c)).profiles)
+                labels.append(np.full(sim.ceiling_per_class, c))
+            X, y = np.concatenate(parts), np.concatenate(labels)
+            sel_name, sel_data, _ = select
+            sets = {sel_name: sel_data, **tests}
+            result = {"n_train": int(len(y)), "models": {}, "what": "trained on the scene simulator's own data "
+                      f"({sim.ceiling_per_class} acquisitions per class of {2 * sim.new_specimens} other specimens, "
+                      f"through the chain's reduced computation; the CNN {p.cnn_seeds} times, each run on its own "
+                      f"1/{p.cnn_seeds} of them)"}
+            for model in CEILING_MODELS:  # the CNN: like for like with the strategies' CNNs
+                n_runs = p.cnn_seeds if model == "cnn" else 1
+                order = np.random.default_rng(child_seed(self.cfg.seed, "ceiling-runs")).permutation(len(y))
+                runs, seconds, seeds = [], 0.0, []
+                for i, part in enumerate(np.array_split(order, n_runs)):
+                    seed = child_seed(self.cfg.seed, "ceiling", model, i)
+                    params = {"epochs": p.cnn_epochs, "patience": p.cnn_patience} if model == "cnn" else {}
+                    clf = make_classifier(model, random_state=seed, **params)
+                    t0 = time.perf_counter()
+                    clf.fit(X[np.sort(part)], y[np.sort(part)])
+                    seconds += time.perf_counter() - t0
+                    seeds.append(seed)
+                    runs.append({n: encode(clf.predict(Xt), classes) for n, (Xt, _) in sets.items()})
+                result["models"][model] = {"train_seconds": seconds, "seeds": seeds,
+                                           "predictions": {n: [r[n] for r in runs] for n in sets}}
+            return result
+        return self.cache.run("ceiling", settings_key(self.key, sim.ceiling_per_class, p.cnn_seeds, p.cnn_epochs,
+                                                      p.cnn_patience), compute)
