@@ -83,7 +83,7 @@ def invocation(args) -> str:
             parts += [opt, str(value)]
     if args.quick:
         parts.insert(2, "--quick")
-    if getattr(args, "threads", None) is not None:
+    if getattr(args, "threads", None) not in (None, 1):  # 1: the default
         parts += ["--threads", str(args.threads)]
     return shlex.join(parts)
 
