@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import figures
+from .figures_speed import speed_figure
 from .markup import Figures, Html, details, table, td
 from .numbers import decimals, fmt, fmt_sig, spread
 
@@ -32,7 +32,7 @@ def seeds_note(r: dict) -> str:
 def speed_section(r: dict, j: dict, figs: Figures, w: Html) -> str:
     test = j["test"]
     out = [INTRO, seeds_note(r),
-           figs.embed("speed", figures.speed_figure(r, test),
+           figs.embed("speed", speed_figure(r, test),
                       "Speed against error of every stage: generator, likelihood, calibration, chain path, training")]
     rows = []
     for i, row in enumerate((r.get("speed") or {}).get("rows") or []):
