@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..radar.seeds import rng as seeded_rng
+
 LEVEL = 0.95
 
 
@@ -90,7 +92,7 @@ def evaluate(y_true, y_pred, labels=None, n_boot: int = 1000, random_state=0) ->
            "confusion_matrix": cm[0].tolist(), "labels": labels, "n": int(t.size),
            "per_class": per_class, "ci": {}}
     if n_boot:
-        rng = np.random.default_rng(random_state)
+        rng = seeded_rng(random_state)
         ci_acc, ci_bal = [], []
         ci_prec, ci_rec = [], []
         for lo in range(0, n_boot, 500):  # bounded memory: (500, n) indices at a time
@@ -110,13 +112,13 @@ def resample_indices(n: int, n_boot: int, random_state=0) -> np.ndarray:
     """(n_boot, n) bootstrap resamples of n test items (with replacement), from
     ``random_state``; the same arguments give the same resamples, so results scored
     on one set with one ``random_state`` are paired."""
-    return np.random.default_rng(random_state).integers(0, n, size=(int(n_boot), int(n)))
+    return seeded_rng(random_state).integers(0, n, size=(int(n_boot), int(n)))
 
 
 def seed_uniforms(n_boot: int, n_runs: int, random_state=0) -> np.ndarray:
     """(n_boot, n_runs) uniforms in [0, 1) that pick training runs in every resample
     (``floor(u * S)`` for a result of S runs): results with as many runs get the same picks."""
-    return np.random.default_rng(random_state).random((int(n_boot), max(int(n_runs), 1)))
+    return seeded_rng(random_state).random((int(n_boot), max(int(n_runs), 1)))
 
 
 def _point(cm: np.ndarray, labels) -> dict:

@@ -51,7 +51,8 @@ def summary(results: dict) -> str:
         rows.append([name, test, str(m.get("n", "")), _fmt(m.get("balanced_accuracy")), ci,
                      *(_fmt(r, ".2f") for r in recalls)])
 
-    best = (results.get("best_strategy") or {}).get("tied") or []
+    b = results.get("best_strategy") or {}
+    best = b.get("tied") or ([b["name"]] if b.get("name") else [])  # the choice, or the strategies tied
     for name, s in results["strategies"].items():
         tests = s["tests"]
         test = "new" if "new" in tests else next(t for t in tests if t != sel)

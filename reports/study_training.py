@@ -15,6 +15,7 @@ import time
 import numpy as np
 
 from ..radar.seeds import child_seed
+from ..radar.seeds import rng as seeded_rng
 from . import jobs
 from .cache import settings_key
 
@@ -87,7 +88,7 @@ class TrainingStages:
             scene = SceneConfig(n_ramps=sim.ramps)
             parts, labels = [], []
             for c in self.cfg.classes:
-                rng = np.random.default_rng(child_seed(self.cfg.seed, "ceiling", c))
+                rng = np.random.default_rng(child_seed(self.cfg.seed, "ceiling", c))  # as before: same specimens
                 specimens = draw_specimens(load_reference(c).to_array(), 2 * sim.new_specimens, scene, rng)
                 x = specimens[np.arange(sim.ceiling_per_class) % len(specimens)]
                 parts.append(render_through_chain(x, scene, random_state=child_seed(self.cfg.seed, "ceiling-chain",
@@ -102,7 +103,7 @@ class TrainingStages:
                       f"1/{p.cnn_seeds} of them)"}
             for model in CEILING_MODELS:  # the CNN: like for like with the strategies' CNNs
                 n_runs = p.cnn_seeds if model == "cnn" else 1
-                order = np.random.default_rng(child_seed(self.cfg.seed, "ceiling-runs")).permutation(len(y))
+                order = seeded_rng(self.cfg.seed, "ceiling-runs").permutation(len(y))
                 runs, seconds, seeds = [], 0.0, []
                 for i, part in enumerate(np.array_split(order, n_runs)):
                     seed = child_seed(self.cfg.seed, "ceiling", model, i)
