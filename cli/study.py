@@ -148,7 +148,8 @@ def add_run(sub, parents, help):
                         "4-ramp campaign)")
     p.add_argument("--seed", type=seed_int, default=None, help="the study's one seed (default: the config's, 0)")
     p.add_argument("--workers", type=positive_int, default=None, metavar="N",
-                   help="local worker processes for independent jobs (default: the config's, 1)")
+                   help="local worker processes for independent jobs: the classes' calibrations, the strategies' "
+                        "CNNs (default: the config's, 2; the results do not depend on it)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="dask.distributed scheduler address, or 'local' to start a LocalCluster (default: none)")
     p.set_defaults(func=run_study)

@@ -14,7 +14,7 @@ Example ``study.toml``::
     [protocol]
     sigma_p = [0.0, 0.1, 0.2, 0.3]
     acquisition_ramps = 32      # when the files do not say ramps_per_frame
-    cnn_n_per_class = 16000     # per training run
+    cnn_n_per_class = 16000
     cnn_seeds = 3
 
 The simulated default is a 32-ramp campaign (``[simulation] ramps = 4`` or
@@ -80,15 +80,16 @@ class ProtocolConfig:
     specimen_widths: tuple[float, ...] = (0.5, 1.0, 2.0)    # x the specimen model's default spreads
     models: tuple[str, ...] = ("svm", "nb", "xgb")          # the fast classifiers that rank the choices
     sweep_n_per_class: int = 1500
-    # every CNN is trained cnn_seeds times (training runs), each on its own freshly drawn set of
-    # cnn_n_per_class profiles per class (tsaug: tsaug_n_per_class); the report gives the mean over the
-    # runs with an interval covering them. 3 runs x 2000 cost what 1 run x 6000 did (the published
-    # 32,000-profile single run is cnn_seeds = 1, cnn_n_per_class = 16000)
+    # every CNN is trained cnn_seeds times (training runs: weights, split, shuffles) on its strategy's
+    # one training set of cnn_n_per_class profiles per class (tsaug: tsaug_n_per_class); the report
+    # gives the mean over the runs with an interval covering them. Smaller sets or fewer epochs cost
+    # more error than the runs' spread (README: 'Training runs: where they are paid for'): the runs are
+    # paid with a second worker instead. The published single run: cnn_seeds = 1, cnn_n_per_class = 16000
     cnn_seeds: int = 3
-    cnn_n_per_class: int = 2000
+    cnn_n_per_class: int = 6000     # 12,000 profiles
     cnn_epochs: int = 40
     cnn_patience: int | None = 8    # early stopping on validation loss; None trains all epochs
-    tsaug_n_per_class: int = 1000
+    tsaug_n_per_class: int = 3000
     tsaug_epochs: int = 60
     strategies: tuple[str, ...] = STRATEGIES
     acquisition_ramps: int | None = None  # measured files that do not say ramps_per_frame: their K
@@ -111,7 +112,7 @@ class StudyConfig:
     seed: int = 0
     classes: tuple[str, ...] = ("HELI", "QUAD")
     quick: bool = False
-    workers: int = 1
+    workers: int = 2                # local worker processes (the classes' calibrations, the strategies' CNNs)
     scheduler: str | None = None
     data: DataConfig = field(default_factory=DataConfig)
     simulation: SimulationConfig = field(default_factory=SimulationConfig)
@@ -129,7 +130,7 @@ class StudyConfig:
         """Small sizes for a run of about a minute (tests, first look)."""
         p = dataclasses.replace(
             self.protocol, sigma_p=(0.0, 0.2), specimen_widths=(1.0,), models=("nb", "xgb"), sweep_n_per_class=200,
-            cnn_n_per_class=200, cnn_epochs=8, cnn_patience=4, tsaug_n_per_class=100, tsaug_epochs=8, n_boot=200,
+            cnn_n_per_class=600, cnn_epochs=8, cnn_patience=4, tsaug_n_per_class=300, tsaug_epochs=8, n_boot=200,
             calibration_max_steps=60, calibration_starts=1, calibration_fit_budget=200, calibration_draws=6,
             calibration_ramps_drawn=2)
         s = dataclasses.replace(self.simulation, ramps=4, n_calibration=3, n_select=6, n_new={c: 24 for c in self.classes},

@@ -17,16 +17,18 @@ INTRO = ("<p class='note'>Each stage's cost against its error, measured in this 
 
 
 def seeds_note(r: dict) -> str:
-    """How the study pays for its training runs (the trade of set size against seeds)."""
+    """How the study pays for its training runs (what they cost, what they buy)."""
     p = r["config"]["protocol"]
     s = p.get("cnn_seeds", 1)
     if s <= 1:
         return ""
-    return (f"<p class='note'>Training randomness: every CNN is trained {s} times (seeds), each run on its own "
-            f"freshly drawn set of {p['cnn_n_per_class']:,} profiles per class ({p['tsaug_n_per_class']:,} for "
-            f"tsaug), so the {s} runs together cost what one run on {s} times as many profiles would. The spread "
-            "of the runs (below: the lowest and highest run's error) is the error one run alone would carry; the "
-            f"mean over the {s} runs has about 1/sqrt({s}) of it, and the report's intervals include it.</p>")
+    return (f"<p class='note'>Training randomness: every CNN is trained {s} times (seeds) on its strategy's one "
+            f"training set ({p['cnn_n_per_class']:,} profiles per class, drawn once; {p['tsaug_n_per_class']:,} for "
+            f"tsaug), each run for at most {p['cnn_epochs']} epochs ({p['tsaug_epochs']} for tsaug). The set is "
+            f"made once, so the runs cost {s} trainings, not {s} sets. The spread of the runs (below: the lowest "
+            "and highest run's error) is the error one run alone would carry; the mean over the runs has about "
+            f"1/sqrt({s}) of it, and the report's intervals include it. README, 'Training runs: where they are "
+            "paid for', gives the measured trade against set size and epochs.</p>")
 
 
 def speed_section(r: dict, j: dict, figs: Figures, w: Html) -> str:
@@ -60,7 +62,7 @@ def speed_section(r: dict, j: dict, figs: Figures, w: Html) -> str:
             if runs > 1 and lo_hi:
                 err += f" (runs {spread({'balanced_accuracy': [1 - lo_hi[1], 1 - lo_hi[0]]}, d)})"
             rows.append([td("training", False),
-                         td(f"CNN {w.esc(name)}, {runs} run(s) of {s['n_train'] // runs:,} profiles", False),
+                         td(f"CNN {w.esc(name)}, {runs} run(s) on one set of {s['n_train']:,} profiles", False),
                          td(f"{fmt(s['train_seconds'] / runs, 1)} s per run"),
                          td(err),
                          td(f"1 - balanced accuracy on the '{w.esc(test)}' set, mean over the runs (lowest–highest run)",

@@ -181,43 +181,30 @@ class Study(TrainingStages):
                 if not name.startswith("calibration_") and name != "select"}
 
     # ---- stage 2: calibration --------------------------------------------------------
+    def _calibration_job(self, cls: str, acquisition) -> dict:
+        from ..inference import CalibrationSettings
+
+        p = self.cfg.protocol
+        base = CalibrationSettings.quick() if self.cfg.quick else CalibrationSettings()
+        settings = base.replace(time_budget=p.calibration_time_budget, n_starts=p.calibration_starts,
+                                fit_budget=p.calibration_fit_budget, n_acquisitions=p.calibration_draws,
+                                ramps_drawn=p.calibration_ramps_drawn, max_steps=p.calibration_max_steps,
+                                check_every=min(base.check_every, p.calibration_max_steps))
+        return {"cls": cls, "profiles": self.load_set(f"calibration_{cls}")[0], "acquisition": acquisition,
+                "settings": settings, "seed": _stage_seed(self.cfg, "calibrate", cls), "out": str(self.out)}
+
     def calibrate(self, cls: str, acquisition) -> dict:
-        from ..inference import CalibrationSettings, calibrate
-        from ..inference.priors import engine_lines
+        return self.cache.run(f"calibrate_{cls}", settings_key(self.calib_key, cls),
+                              lambda: _jsonable(jobs.calibrate_class(self._calibration_job(cls, acquisition))))
 
-        def compute():
-            X, _ = self.load_set(f"calibration_{cls}")
-            p = self.cfg.protocol
-            base = CalibrationSettings.quick() if self.cfg.quick else CalibrationSettings()
-            settings = base.replace(time_budget=p.calibration_time_budget, n_starts=p.calibration_starts,
-                                    fit_budget=p.calibration_fit_budget, n_acquisitions=p.calibration_draws,
-                                    ramps_drawn=p.calibration_ramps_drawn, max_steps=p.calibration_max_steps,
-                                    check_every=min(base.check_every, p.calibration_max_steps))
-            checkpoint = self.out / "posteriors" / f"{cls}.chain.h5"
-            res = calibrate(X, cls, acquisition=acquisition, settings=settings,
-                            random_state=_stage_seed(self.cfg, "calibrate", cls), backend_path=checkpoint)
-            nc = self.out / "posteriors" / f"{cls}.nc"
-            res.save(nc)
-            for f in checkpoint.parent.glob(checkpoint.name + "*"):
-                f.unlink()  # only needed to resume an interrupted run
-            corner_png = self.out / "figures" / f"corner_{cls}.png"
-            trace_png = self.out / "figures" / f"trace_{cls}.png"
-            from .style import figure_style
-
-            with figure_style():
-                res.plot_corner(corner_png)
-                res.plot_trace(trace_png)
-            lines = res.lines()  # (n, E, 4, 2): frequency rad/s, amplitude m
-            w_ref, a_ref, _ = engine_lines(res.priors.centres)
-            return {"posterior": str(nc), "corner": str(corner_png), "trace": str(trace_png),
-                    "converged": bool(res.converged), "diagnostics": _jsonable(res.diagnostics),
-                    "summary": _jsonable(res.summary()), "n_profiles": int(len(X)),
-                    "acquisition": res.acquisition.to_dict(),
-                    "measured_acquisition": res.measured_acquisition().to_dict(),
-                    "lines": {"frequency_q": np.quantile(lines[..., 0], [0.05, 0.5, 0.95], axis=0).tolist(),
-                              "amplitude_q": np.quantile(lines[..., 1], [0.05, 0.5, 0.95], axis=0).tolist(),
-                              "reference_frequency": np.sort(w_ref, axis=-1).tolist()}}
-        return self.cache.run(f"calibrate_{cls}", settings_key(self.calib_key, cls), compute)
+    def calibrations(self, acquisition, executor) -> dict:
+        """Every class calibrated (cached); with workers, the uncached classes at once."""
+        todo = [c for c in self.cfg.classes if not self.cache.has(f"calibrate_{c}", settings_key(self.calib_key, c))]
+        if len(todo) > 1 and self.cfg.workers > 1:
+            work = [self._calibration_job(c, acquisition) for c in todo]
+            for c, res in zip(todo, executor.map(jobs.calibrate_class, work)):
+                self.cache.store(f"calibrate_{c}", settings_key(self.calib_key, c), _jsonable(res), res["seconds"])
+        return {c: self.calibrate(c, acquisition) for c in self.cfg.classes}
 
     # ---- stages 3-4: candidates and the choice ---------------------------------------------
     def specs(self, calib: dict, tsaug_sources) -> dict:
@@ -317,7 +304,7 @@ class Study(TrainingStages):
             self.log(f"acquisition: {acq.describe()}")
             tests = self.test_sets(index)
             select = self.selection_set(index)
-            calib = {c: self.calibrate(c, acq) for c in self.cfg.classes}
+            calib = self.calibrations(acq, executor)
             tsaug_src = [self.load_set(f"calibration_{c}") for c in self.cfg.classes]
             specs = self.specs(calib, (np.concatenate([s[0] for s in tsaug_src]),
                                        np.concatenate([s[1] for s in tsaug_src])))

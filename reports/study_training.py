@@ -2,11 +2,13 @@
 ``cnn_<strategy>``) and the separability ceiling (stage ``ceiling``). A mixin of
 :class:`mdaug.reports.study.Study` (it uses the study's config, cache and folder).
 
-Training runs: every CNN is trained ``protocol.cnn_seeds`` times; run ``i`` of a
-strategy draws its own training set and its weights, split and shuffles from
-``child_seed(seed, "cnn", strategy, i)`` (the one seed helper), so runs are
-independent of each other and of the order or process they run in. The stages store
-predictions; :mod:`.statistics` scores them.
+Training runs: every CNN is trained ``protocol.cnn_seeds`` times on its strategy's one
+training set (drawn once, from ``child_seed(seed, "cnn", strategy)``); run ``i`` takes
+its weights, validation split and shuffles from its own seed: run 0 from that same
+seed (so it is the single CNN of a one-run study), run ``i`` > 0 from
+``child_seed(seed, "cnn", strategy, i)`` (the one seed helper), so runs do not depend
+on the order or process they run in. The stages store predictions; :mod:`.statistics`
+scores them.
 """
 from __future__ import annotations
 
@@ -15,7 +17,6 @@ import time
 import numpy as np
 
 from ..radar.seeds import child_seed
-from ..radar.seeds import rng as seeded_rng
 from . import jobs
 from .cache import settings_key
 
@@ -25,10 +26,16 @@ PARAMETER = {"sigma_p_published": "sigma_p", "sigma_p_fit": "sigma_p", "posterio
 CEILING_MODELS = ("svm", "xgb", "nb", "cnn")
 
 
+def run_seeds(first: int, seed: int, n: int, *keys) -> list[int]:
+    """The seeds of ``n`` training runs: ``first`` (the one-run study's seed), then
+    ``child_seed(seed, *keys, i)`` for i = 1 .. n - 1."""
+    return [int(first)] + [child_seed(seed, *keys, i) for i in range(1, n)]
+
+
 class TrainingStages:
     # ---- stage 5: CNN per strategy, several runs ------------------------------------------------
-    def cnn_jobs(self, specs: dict, choice: dict, select, tests: dict) -> dict[str, list[dict]]:
-        """{strategy: [run job, ...]}: its CNN's training runs at its chosen setting."""
+    def cnn_jobs(self, specs: dict, choice: dict, select, tests: dict) -> dict[str, dict]:
+        """{strategy: job}: its CNN's training runs at its chosen setting."""
         p = self.cfg.protocol
         sel_name, sel_data, _ = select
         out = {}
@@ -39,35 +46,28 @@ class TrainingStages:
             sets = {sel_name: sel_data, **tests}
             if tsaug:  # tsaug copies the calibration measurements: never scored on them
                 sets = {k: v for k, v in sets.items() if k != "calibration"}
-            out[name] = [{"name": name, "model": "cnn", "classes": list(self.cfg.classes), "spec": spec,
-                          "n_per_class": p.tsaug_n_per_class if tsaug else p.cnn_n_per_class, "tests": sets,
-                          "seed": child_seed(self.cfg.seed, "cnn", name, i),
-                          "model_params": {"epochs": p.tsaug_epochs if tsaug else p.cnn_epochs,
-                                           "patience": p.cnn_patience, "normalisation": p.normalisation},
-                          "model_path": str(self.out / "models" / f"cnn_{name}_run{i}.zip")}
-                         for i in range(p.cnn_seeds)]
+            seed = child_seed(self.cfg.seed, "cnn", name)
+            out[name] = {"name": name, "model": "cnn", "classes": list(self.cfg.classes), "spec": spec,
+                         "n_per_class": p.tsaug_n_per_class if tsaug else p.cnn_n_per_class, "tests": sets,
+                         "seed": seed, "run_seeds": run_seeds(seed, self.cfg.seed, p.cnn_seeds, "cnn", name),
+                         "model_params": {"epochs": p.tsaug_epochs if tsaug else p.cnn_epochs,
+                                          "patience": p.cnn_patience, "normalisation": p.normalisation},
+                         "model_path": str(self.out / "models" / f"cnn_{name}_run{{run}}.zip")}
         return out
 
-    def _cnn_key(self, runs: list[dict]) -> str:
-        spec = {k: v for k, v in runs[0]["spec"].items() if k not in ("profiles", "labels")}
-        return settings_key(self.cnn_key, runs[0]["name"], spec, [r["seed"] for r in runs])
+    def _cnn_key(self, job: dict) -> str:
+        spec = {k: v for k, v in job["spec"].items() if k not in ("profiles", "labels")}
+        return settings_key(self.cnn_key, job["name"], spec, job["run_seeds"])
 
-    def cnns(self, run_jobs: dict, executor) -> dict:
-        """Every strategy's stage result (cached; uncached runs go to the executor together)."""
-        todo = [(name, job) for name, runs in run_jobs.items()
-                if not self.cache.has(f"cnn_{name}", self._cnn_key(runs)) for job in runs]
+    def cnns(self, cnn_jobs: dict, executor) -> dict:
+        """Every strategy's stage result (cached; uncached strategies go to the executor together)."""
+        todo = [j for name, j in cnn_jobs.items() if not self.cache.has(f"cnn_{name}", self._cnn_key(j))]
         if len(todo) > 1 and self.cfg.workers > 1:
-            done: dict[str, list] = {}
-            for (name, _), res in zip(todo, executor.map(jobs.train_and_test, [j for _, j in todo])):
-                done.setdefault(name, []).append(res)
-            for name, res in done.items():
-                runs = run_jobs[name]
-                self.cache.store(f"cnn_{name}", self._cnn_key(runs), jobs.combine_runs(runs[0], res),
-                                 sum(r["data_seconds"] + r["train_seconds"] for r in res))
-        return {name: self.cache.run(f"cnn_{name}", self._cnn_key(runs),
-                                     lambda runs=runs: jobs.combine_runs(runs[0], [jobs.train_and_test(j)
-                                                                                    for j in runs]))
-                for name, runs in run_jobs.items()}
+            for job, res in zip(todo, executor.map(jobs.train_and_test, todo)):
+                self.cache.store(f"cnn_{job['name']}", self._cnn_key(job), res,
+                                 res["data_seconds"] + res["train_seconds"])
+        return {name: self.cache.run(f"cnn_{name}", self._cnn_key(j), lambda j=j: jobs.train_and_test(j))
+                for name, j in cnn_jobs.items()}
 
     # ---- stage 6: separability ceiling --------------------------------------------------------------
     def ceiling(self, tests: dict, select) -> dict:
@@ -99,20 +99,17 @@ class TrainingStages:
             sets = {sel_name: sel_data, **tests}
             result = {"n_train": int(len(y)), "models": {}, "what": "trained on the scene simulator's own data "
                       f"({sim.ceiling_per_class} acquisitions per class of {2 * sim.new_specimens} other specimens, "
-                      f"through the chain's reduced computation; the CNN {p.cnn_seeds} times, each run on its own "
-                      f"1/{p.cnn_seeds} of them)"}
+                      f"through the chain's reduced computation; the CNN {p.cnn_seeds} times, like the strategies')"}
             for model in CEILING_MODELS:  # the CNN: like for like with the strategies' CNNs
-                n_runs = p.cnn_seeds if model == "cnn" else 1
-                order = seeded_rng(self.cfg.seed, "ceiling-runs").permutation(len(y))
-                runs, seconds, seeds = [], 0.0, []
-                for i, part in enumerate(np.array_split(order, n_runs)):
-                    seed = child_seed(self.cfg.seed, "ceiling", model, i)
+                first = child_seed(self.cfg.seed, "ceiling", model)
+                seeds = run_seeds(first, self.cfg.seed, p.cnn_seeds if model == "cnn" else 1, "ceiling", model)
+                runs, seconds = [], 0.0
+                for seed in seeds:
                     params = {"epochs": p.cnn_epochs, "patience": p.cnn_patience} if model == "cnn" else {}
                     clf = make_classifier(model, random_state=seed, **params)
                     t0 = time.perf_counter()
-                    clf.fit(X[np.sort(part)], y[np.sort(part)])
+                    clf.fit(X, y)
                     seconds += time.perf_counter() - t0
-                    seeds.append(seed)
                     runs.append({n: encode(clf.predict(Xt), classes) for n, (Xt, _) in sets.items()})
                 result["models"][model] = {"train_seconds": seconds, "seeds": seeds,
                                            "predictions": {n: [r[n] for r in runs] for n in sets}}

@@ -27,6 +27,10 @@ def main(argv=None) -> int:
     ap.add_argument("--total", type=int, default=6000, help="profiles per class over all runs")
     ap.add_argument("--epochs", type=int, default=40)
     ap.add_argument("--layouts", default="1,3", help="numbers of runs to compare")
+    ap.add_argument("--patience", type=int, default=8)
+    ap.add_argument("--shared", action="store_true",
+                    help="every run trains on one set of --total profiles per class (drawn once) instead of "
+                         "its own 1/runs of them")
     args = ap.parse_args(argv)
     classes = ["HELI", "QUAD"]
     sets = {}
@@ -45,22 +49,25 @@ def main(argv=None) -> int:
                 "through_chain": False}
     else:
         spec = {"strategy": "sigma_p_published", "sigma_p": 0.2, "through_chain": False}
-    print(f"strategy {args.strategy}, {args.total} profiles per class in all, {args.epochs} epochs (patience 8)")
+    print(f"strategy {args.strategy}, {args.total} profiles per class")
     for runs in (int(k) for k in args.layouts.split(",")):
-        n = args.total // runs
-        scores, t_data, t_train = {k: [] for k in sets}, 0.0, 0.0
+        n = args.total if args.shared else args.total // runs
+        scores, t_data, t_train, epochs = {k: [] for k in sets}, 0.0, 0.0, []
         for i in range(runs):
             seed = child_seed(0, "cnn-seeds-benchmark", runs, i)
             t0 = time.perf_counter()
-            X, y, groups = jobs.training_set(spec, classes, n, seed)
+            if i == 0 or not args.shared:
+                X, y, groups = jobs.training_set(spec, classes, n, seed)
             t_data += time.perf_counter() - t0
-            clf = make_classifier("cnn", random_state=seed, epochs=args.epochs, patience=8)
+            clf = make_classifier("cnn", random_state=seed, epochs=args.epochs, patience=args.patience)
             t0 = time.perf_counter()
             clf.fit(X, y, **({} if groups is None else {"groups": groups}))
             t_train += time.perf_counter() - t0
+            epochs.append(f"{clf.split_scores_['epochs_run']} (best {clf.split_scores_['best_epoch']})")
             for k, (Xt, yt) in sets.items():
                 scores[k].append(evaluate(yt, clf.predict(Xt), labels=classes, n_boot=0)["balanced_accuracy"])
-        print(f"{runs} run(s) x {n} per class: data {t_data:.0f} s, training {t_train:.0f} s")
+        print(f"{runs} run(s) x {n} per class{' (one shared set)' if args.shared else ''}, {args.epochs} epochs, "
+              f"patience {args.patience}: data {t_data:.0f} s, training {t_train:.0f} s; epochs run {', '.join(epochs)}")
         for k, v in scores.items():
             v = np.array(v)
             print(f"  {k:>9s}: mean {v.mean():.3f}  runs {' '.join(f'{x:.3f}' for x in v)}"
