@@ -76,6 +76,8 @@ def finding(results: dict, w=Html(), j: dict | None = None) -> list[str]:
         nxt = max(others, key=lambda n: strategies[n]["tests"][test]["balanced_accuracy"]) if others else None
         if nxt is None:
             s1 += "; every other strategy is degenerate or not better than chance."
+        elif comparison(results, test, tied[0], nxt) is None:  # results without paired comparisons
+            s1 += "."
         elif len(tied) == 1:
             c = comparison(results, test, tied[0], nxt)
             s1 += (f"; against the best of the others on this set, {w.esc(nxt)} ({_score(results, w, nxt, test)}), "
@@ -85,7 +87,7 @@ def finding(results: dict, w=Html(), j: dict | None = None) -> list[str]:
             s1 += "."
         else:
             c = comparison(results, test, tied[0], tied[1])
-            s1 += f"; {w.esc(tied[0])} minus {w.esc(tied[1])}: {_diff(c)}, {c['word']}."
+            s1 += f"; {w.esc(tied[0])} minus {w.esc(tied[1])}: {_diff(c)}, {c['word']}." if c else "."
     sentences = [s1]
     parts = []
     for n in tied:
