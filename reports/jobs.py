@@ -124,6 +124,21 @@ def calibrate_class(job: dict) -> dict:
             "seconds": time.perf_counter() - t0}
 
 
+def fit_predict(job: dict) -> dict:
+    """Train one classifier (``model``, ``seed``, ``params``) on (``X``, ``y``) and predict
+    every set of ``tests``: {train_seconds, predictions (encoded)}."""
+    from ..classify import make_classifier
+    from .statistics import encode
+
+    _threads(job.get("threads", 1))
+    clf = make_classifier(job["model"], random_state=job["seed"], **job.get("params", {}))
+    t0 = time.perf_counter()
+    clf.fit(job["X"], job["y"])
+    seconds = time.perf_counter() - t0
+    return {"train_seconds": seconds, "predictions": {n: encode(clf.predict(np.asarray(Xt)), job["classes"])
+                                                       for n, (Xt, _) in job["tests"].items()}}
+
+
 def candidate(job: dict) -> dict:
     """One choice candidate (a strategy at one sigma_P or width): its training set, the
     fast classifiers trained on it and scored on every set given (the selection set

@@ -318,7 +318,7 @@ class Study(TrainingStages):
                 self.log(f"choice [{n}]: {c['parameter']} = {c['value']} (on '{sel_name}')")
             strategies = self.cnns(self.cnn_jobs(specs, choice, select, tests), executor)
             figure = self.profiles_figure(specs, choice, tests)
-            ceiling = self.ceiling(tests, select) if self.cfg.simulated else None
+            ceiling = self.ceiling(tests, select, executor) if self.cfg.simulated else None
             speed = self.speed(acq)
         finally:
             executor.close()

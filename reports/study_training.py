@@ -12,8 +12,6 @@ scores them.
 """
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from ..radar.seeds import child_seed
@@ -70,16 +68,15 @@ class TrainingStages:
                 for name, j in cnn_jobs.items()}
 
     # ---- stage 6: separability ceiling --------------------------------------------------------------
-    def ceiling(self, tests: dict, select) -> dict:
+    def ceiling(self, tests: dict, select, executor=None) -> dict:
         """Classifiers trained on the scene simulator's own data (other specimens): the
-        fast models on the whole set, the CNN ``cnn_seeds`` times, each run on its own
-        part of the set (like the strategies' CNNs). Predictions only; scored and chosen
-        (on the selection set) with everything else."""
-        from ..classify import make_classifier
+        fast models once, the CNN ``cnn_seeds`` times (like the strategies' CNNs), all
+        on the whole set; every fit is a job of ``executor``
+        (None: in this process). Predictions only; scored and chosen (on the selection
+        set) with everything else."""
         from ..generator import load_reference
         from ..generator.chain_path import render_through_chain
         from ..generator.scene import SceneConfig, draw_specimens
-        from .statistics import encode
 
         sim, p = self.cfg.simulation, self.cfg.protocol
         classes = sorted(self.cfg.classes)
@@ -100,19 +97,21 @@ class TrainingStages:
             result = {"n_train": int(len(y)), "models": {}, "what": "trained on the scene simulator's own data "
                       f"({sim.ceiling_per_class} acquisitions per class of {2 * sim.new_specimens} other specimens, "
                       f"through the chain's reduced computation; the CNN {p.cnn_seeds} times, like the strategies')"}
+            work = []
             for model in CEILING_MODELS:  # the CNN: like for like with the strategies' CNNs
                 first = child_seed(self.cfg.seed, "ceiling", model)
-                seeds = run_seeds(first, self.cfg.seed, p.cnn_seeds if model == "cnn" else 1, "ceiling", model)
-                runs, seconds = [], 0.0
-                for seed in seeds:
-                    params = {"epochs": p.cnn_epochs, "patience": p.cnn_patience} if model == "cnn" else {}
-                    clf = make_classifier(model, random_state=seed, **params)
-                    t0 = time.perf_counter()
-                    clf.fit(X, y)
-                    seconds += time.perf_counter() - t0
-                    runs.append({n: encode(clf.predict(Xt), classes) for n, (Xt, _) in sets.items()})
-                result["models"][model] = {"train_seconds": seconds, "seeds": seeds,
-                                           "predictions": {n: [r[n] for r in runs] for n in sets}}
+                params = {"epochs": p.cnn_epochs, "patience": p.cnn_patience} if model == "cnn" else {}
+                for seed in run_seeds(first, self.cfg.seed, p.cnn_seeds if model == "cnn" else 1, "ceiling", model):
+                    work.append({"model": model, "seed": seed, "params": params, "X": X, "y": y, "tests": sets,
+                                 "classes": classes})
+            done = executor.map(jobs.fit_predict, work) if executor is not None else map(jobs.fit_predict, work)
+            for job, res in zip(work, done):
+                m = result["models"].setdefault(job["model"], {"train_seconds": 0.0, "seeds": [],
+                                                               "predictions": {n: [] for n in sets}})
+                m["train_seconds"] += res["train_seconds"]
+                m["seeds"].append(job["seed"])
+                for n in sets:
+                    m["predictions"][n].append(res["predictions"][n])
             return result
         return self.cache.run("ceiling", settings_key(self.key, sim.ceiling_per_class, p.cnn_seeds, p.cnn_epochs,
                                                       p.cnn_patience), compute)
