@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..radar.seeds import rng as seeded_rng
+
 LEVEL = 0.95
 
 
@@ -90,7 +92,7 @@ def evaluate(y_true, y_pred, labels=None, n_boot: int = 1000, random_state=0) ->
            "confusion_matrix": cm[0].tolist(), "labels": labels, "n": int(t.size),
            "per_class": per_class, "ci": {}}
     if n_boot:
-        rng = np.random.default_rng(random_state)
+        rng = seeded_rng(random_state)
         ci_acc, ci_bal = [], []
         ci_prec, ci_rec = [], []
         for lo in range(0, n_boot, 500):  # bounded memory: (500, n) indices at a time
@@ -104,6 +106,132 @@ def evaluate(y_true, y_pred, labels=None, n_boot: int = 1000, random_state=0) ->
                      "per_class": {lab: {"precision": _interval(pr[:, i]), "recall": _interval(rc[:, i])}
                                    for i, lab in enumerate(labels)}}
     return out
+
+
+def resample_indices(n: int, n_boot: int, random_state=0) -> np.ndarray:
+    """(n_boot, n) bootstrap resamples of n test items (with replacement), from
+    ``random_state``; the same arguments give the same resamples, so results scored
+    on one set with one ``random_state`` are paired."""
+    return seeded_rng(random_state).integers(0, n, size=(int(n_boot), int(n)))
+
+
+def seed_uniforms(n_boot: int, n_runs: int, random_state=0) -> np.ndarray:
+    """(n_boot, n_runs) uniforms in [0, 1) that pick training runs in every resample
+    (``floor(u * S)`` for a result of S runs): results with as many runs get the same picks."""
+    return seeded_rng(random_state).random((int(n_boot), max(int(n_runs), 1)))
+
+
+def _point(cm: np.ndarray, labels) -> dict:
+    acc, bal, prec, rec = _rates(cm[None])
+    support = cm.sum(axis=1)
+    return {"accuracy": float(acc[0]), "balanced_accuracy": float(bal[0]),
+            "recall": {lab: (float(rec[0, i]) if support[i] else None) for i, lab in enumerate(labels)},
+            "precision": {lab: (None if np.isnan(prec[0, i]) else float(prec[0, i])) for i, lab in enumerate(labels)}}
+
+
+def evaluate_runs(y_true, y_preds, labels=None, n_boot: int = 1000, resamples=None, uniforms=None,
+                  random_state=0, seeds=None) -> dict:
+    """Metrics of S training runs (seeds) of one classifier on one test set.
+
+    ``y_preds`` (S, N): each run's predictions of the N test items ``y_true``. Every
+    figure is the mean over the runs (``runs`` holds each run's own); the confusion
+    matrix is summed over the runs (S x N predictions). The 95% interval covers both
+    the test sample and the training randomness: each of ``n_boot`` bootstrap
+    resamples of the test items (``resamples``, (n_boot, N), e.g. from
+    :func:`resample_indices`; drawn from ``random_state`` when None) is scored with one
+    run picked at random (``uniforms``, from :func:`seed_uniforms`): the percentile
+    interval of that mixture is where one training run scores on a test sample of
+    this size, so it holds every run's own score (each run is 1/S of the mixture).
+    With S = 1 it is the ordinary percentile bootstrap. Same ``resamples`` and
+    ``uniforms`` for several classifiers: paired intervals.
+
+    Returns :func:`evaluate`'s layout plus ``runs`` (per run: accuracy, balanced
+    accuracy, recall and precision per class), ``n_runs``, ``seeds`` and
+    ``seed_spread`` ({balanced_accuracy: [min, max], sd}); ``ci`` also says
+    ``method``.
+    """
+    y_preds = np.asarray(y_preds)
+    if y_preds.ndim == 1:
+        y_preds = y_preds[None]
+    t, _, labels = _encode(y_true, y_preds[0], labels)
+    p = np.stack([_encode(y_true, row, labels)[1] for row in y_preds])
+    s, n, k = p.shape[0], t.size, len(labels)
+    cms = np.stack([_confusions(t, row, k, np.arange(n)[None, :])[0] for row in p])  # (S, k, k)
+    runs = [_point(cm, labels) for cm in cms]
+    if seeds is not None:
+        for r, sd in zip(runs, seeds):
+            r["seed"] = int(sd)
+    support = cms[0].sum(axis=1)
+
+    def mean(values):
+        v = [x for x in values if x is not None]
+        return float(np.mean(v)) if v else None
+
+    bal = np.array([r["balanced_accuracy"] for r in runs])
+    per_class = {}
+    for i, lab in enumerate(labels):
+        prec = mean([r["precision"][lab] for r in runs])
+        per_class[lab] = {"precision": 0.0 if prec is None else prec,
+                          "recall": mean([r["recall"][lab] for r in runs]) if support[i] else None,
+                          "n": int(support[i])}
+    out = {"accuracy": float(np.mean([r["accuracy"] for r in runs])), "balanced_accuracy": float(bal.mean()),
+           "confusion_matrix": cms.sum(axis=0).tolist(), "labels": labels, "n": int(n), "n_runs": int(s),
+           "seeds": None if seeds is None else [int(x) for x in seeds], "per_class": per_class, "runs": runs,
+           "seed_spread": {"balanced_accuracy": [float(bal.min()), float(bal.max())],
+                           "sd": float(bal.std(ddof=1)) if s > 1 else 0.0},
+           "ci": {}}
+    if not n_boot:
+        return out
+    if resamples is None:
+        resamples = resample_indices(n, n_boot, random_state)
+    resamples = np.asarray(resamples)
+    if resamples.ndim != 2 or resamples.shape[1] != n:
+        raise ValueError(f"resamples must be (n_boot, {n}) indices, got shape {resamples.shape}")
+    if uniforms is None:
+        uniforms = seed_uniforms(len(resamples), s, random_state)
+    pick = np.minimum((np.asarray(uniforms)[: len(resamples), 0] * s).astype(int), s - 1)
+    acc_b, bal_b, prec_b, rec_b = [], [], [], []
+    for lo in range(0, len(resamples), 500):  # bounded memory
+        idx, who = resamples[lo:lo + 500], pick[lo:lo + 500]
+        b = idx.shape[0]
+        code = (np.arange(b)[:, None] * k * k + t[idx] * k + p[who[:, None], idx]).ravel()
+        a, bb, pr, rc = _rates(np.bincount(code, minlength=b * k * k).reshape(b, k, k))
+        acc_b.append(a), bal_b.append(bb), prec_b.append(pr), rec_b.append(rc)
+    pr, rc = np.concatenate(prec_b), np.concatenate(rec_b)
+    out["ci"] = {"level": LEVEL, "n_boot": int(len(resamples)),
+                 "method": "percentile bootstrap over the test items, one training run picked at random per "
+                           f"resample ({s} run(s))",
+                 "accuracy": _interval(np.concatenate(acc_b)),
+                 "balanced_accuracy": _interval(np.concatenate(bal_b)),
+                 "per_class": {lab: {"precision": _interval(pr[:, i]), "recall": _interval(rc[:, i])}
+                               for i, lab in enumerate(labels)}}
+    return out
+
+
+def run_scores(y_true, y_preds, labels, resamples: np.ndarray) -> np.ndarray:
+    """Balanced accuracy (S, n_boot) of each run on each resample of the test items."""
+    y_preds = np.asarray(y_preds)
+    t, _, labels = _encode(y_true, y_preds[0], labels)
+    k = len(labels)
+    return np.stack([_rates(_confusions(t, _encode(y_true, row, labels)[1], k, resamples))[1] for row in y_preds])
+
+
+def paired_difference(point_a, point_b, scores_a: np.ndarray, scores_b: np.ndarray, uniforms: np.ndarray) -> dict:
+    """Mean-over-runs balanced accuracy of A minus B and its 95% interval, paired.
+
+    point_a, point_b: each run's balanced accuracy on the whole test set; scores_a (S_a, n_boot), scores_b (S_b, n_boot): each run's balanced accuracy on the
+    same resamples of one test set (:func:`run_scores`). In each resample the runs of
+    each classifier are themselves resampled with replacement (``uniforms``
+    (n_boot, >= max S): the same picks for classifiers with as many runs) and averaged:
+    the interval covers the test sample and the training runs of both."""
+    def boot_mean(sc):
+        s = sc.shape[0]
+        pick = np.minimum((uniforms[:, :s] * s).astype(int), s - 1)  # (B, S)
+        return np.take_along_axis(sc.T, pick, axis=1).mean(axis=1)
+
+    uniforms = np.asarray(uniforms)
+    d = boot_mean(np.asarray(scores_a)) - boot_mean(np.asarray(scores_b))
+    return {"difference": float(np.mean(point_a) - np.mean(point_b)), "ci": _interval(d)}
 
 
 def format_metrics(m: dict) -> str:

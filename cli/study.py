@@ -56,19 +56,21 @@ def summary(results: dict) -> str:
         rows.append([name, test, str(m.get("n", "")), _fmt(m.get("balanced_accuracy")), ci,
                      *(_fmt(r, ".2f") for r in recalls)])
 
-    best = (results.get("best_strategy") or {}).get("name")
+    b = results.get("best_strategy") or {}
+    best = b.get("tied") or ([b["name"]] if b.get("name") else [])  # the choice, or the strategies tied
     for name, s in results["strategies"].items():
         tests = s["tests"]
         test = "new" if "new" in tests else next(t for t in tests if t != sel)
         setting = next((f" ({k} {s[k]:g})" for k in ("sigma_p", "width") if s.get(k) is not None), "")
-        row(f"CNN {name}{setting}{' *' if name == best else ''}", test, tests[test])
+        row(f"CNN {name}{setting}{' *' if name in best else ''}", test, tests[test])
     for model, c in ((results.get("ceiling") or {}).get("models") or {}).items():
         tests = c["tests"]
         test = "new" if "new" in tests else next(iter(tests))
         row(f"ceiling {model}", test, tests[test])
     table = format_table(["strategy", "test", "n", "balanced acc.", "95% CI", *(f"recall {c}" for c in classes)],
                          rows, ["<", "<", ">", ">", "<", *(">" for _ in classes)])
-    lines = [table, f"* the best strategy on the selection set '{sel}' ({results['selection']['what']})", ""]
+    lines = [table, f"* the best strategy on the selection set '{sel}' ({results['selection']['what']})"
+             + (" (tied)" if len(best) > 1 else "") + "; mean over each CNN's training runs", ""]
     for cls, r in results["calibration"].items():
         d = r.get("diagnostics", {})
         state = "converged" if r["converged"] else f"NOT converged ({d.get('reason', 'see the report')})"
@@ -86,6 +88,22 @@ def check_study_ramps(cfg) -> None:
     rendered = len(cfg.classes) * (p.cnn_n_per_class + p.sweep_n_per_class * len(p.sigma_p))
     check_size(("--ramps", s.ramps, 32), seconds_each=acquisitions * frames * SECONDS_SCENE_RAMP
                + rendered * SECONDS_FAST_RAMP, what="ramps per frame")
+
+
+def invocation(args) -> str:
+    """The ``mdaug run`` command line as it was run (its options, in a fixed order)."""
+    import shlex
+
+    parts = ["mdaug", "run"]
+    for opt, value in (("--config", args.config), ("--out", args.out), ("--ramps", args.ramps),
+                       ("--seed", args.seed), ("--workers", args.workers), ("--scheduler", args.scheduler)):
+        if value is not None:
+            parts += [opt, str(value)]
+    if args.quick:
+        parts.insert(2, "--quick")
+    if getattr(args, "threads", None) not in (None, 1):  # 1: the default
+        parts += ["--threads", str(args.threads)]
+    return shlex.join(parts)
 
 
 def run_study(args) -> int:
@@ -124,7 +142,7 @@ def run_study(args) -> int:
 
     progress = StageProgress(stage_names(cfg))
     try:
-        study = Study(cfg, out, log=info)
+        study = Study(cfg, out, log=info, invocation=invocation(args))
         study.cache.listener = progress
         results = study.run()
     finally:
@@ -158,7 +176,8 @@ def add_run(sub, parents, help):
                         "4-ramp campaign)")
     p.add_argument("--seed", type=seed_int, default=None, help="the study's one seed (default: the config's, 0)")
     p.add_argument("--workers", type=positive_int, default=None, metavar="N",
-                   help="local worker processes for independent jobs (default: the config's, 1)")
+                   help="local worker processes for independent jobs: the classes' calibrations, the strategies' "
+                        "CNNs (default: the config's, 2; the results do not depend on it)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="dask.distributed scheduler address, or 'local' to start a LocalCluster (default: none)")
     p.set_defaults(func=run_study)

@@ -1,1 +1,2 @@
-"""mdaug.reports (see the issues for what it will hold)."""
+"""mdaug.reports: the study (:mod:`.study`), its statistics and verdicts, and its report
+(:mod:`.report`) and README section (:mod:`.readme`)."""

@@ -31,6 +31,7 @@ class StageCache:
         self.listener = listener
         self.timings: dict[str, float] = {}
         self.resumed: list[str] = []
+        self.stored: set[str] = set()  # stages computed elsewhere in this run (not resumed)
 
     def _notify(self, event: str, *args) -> None:
         if self.listener is not None:
@@ -56,6 +57,7 @@ class StageCache:
     def store(self, name: str, key: str, result, seconds: float):
         """Record a stage computed elsewhere (e.g. by a worker) with its wall time."""
         self.timings[name] = seconds
+        self.stored.add(name)
         text = json.dumps({"key": key, "seconds": seconds, "result": result}, indent=1)
         atomic_write(self.path(name), lambda fh: fh.write(text.encode()))
         self._notify("stage_finished", name, seconds, False)
@@ -67,6 +69,8 @@ class StageCache:
         ``compute()`` returns a JSON-serialisable dict; its wall time is recorded.
         """
         stored = self._stored(name, key)
+        if stored is not None and name in self.stored:  # computed by a worker in this run
+            return stored["result"]
         if stored is not None:
             self.timings[name] = stored["seconds"]
             self.resumed.append(name)

@@ -15,6 +15,7 @@ Example ``study.toml``::
     sigma_p = [0.0, 0.1, 0.2, 0.3]
     acquisition_ramps = 32      # when the files do not say ramps_per_frame
     cnn_n_per_class = 16000
+    cnn_seeds = 3
 
 The simulated default is a 32-ramp campaign (``[simulation] ramps = 4`` or
 ``mdaug run --ramps 4`` gives the 4-ramp one).
@@ -79,7 +80,13 @@ class ProtocolConfig:
     specimen_widths: tuple[float, ...] = (0.5, 1.0, 2.0)    # x the specimen model's default spreads
     models: tuple[str, ...] = ("svm", "nb", "xgb")          # the fast classifiers that rank the choices
     sweep_n_per_class: int = 1500
-    cnn_n_per_class: int = 6000     # 12,000 profiles; the published 32,000 is cnn_n_per_class = 16000
+    # every CNN is trained cnn_seeds times (training runs: weights, split, shuffles) on its strategy's
+    # one training set of cnn_n_per_class profiles per class (tsaug: tsaug_n_per_class); the report
+    # gives the mean over the runs with an interval covering them. Smaller sets or fewer epochs cost
+    # more error than the runs' spread (README: 'Training runs: where they are paid for'): the runs are
+    # paid with a second worker instead. The published single run: cnn_seeds = 1, cnn_n_per_class = 16000
+    cnn_seeds: int = 3
+    cnn_n_per_class: int = 6000     # 12,000 profiles
     cnn_epochs: int = 40
     cnn_patience: int | None = 8    # early stopping on validation loss; None trains all epochs
     tsaug_n_per_class: int = 3000
@@ -105,7 +112,7 @@ class StudyConfig:
     seed: int = 0
     classes: tuple[str, ...] = ("HELI", "QUAD")
     quick: bool = False
-    workers: int = 1
+    workers: int = 2                # local worker processes (the classes' calibrations, the strategies' CNNs)
     scheduler: str | None = None
     data: DataConfig = field(default_factory=DataConfig)
     simulation: SimulationConfig = field(default_factory=SimulationConfig)
@@ -179,7 +186,10 @@ class StudyConfig:
         bad = [s for s in p.sigma_p if not 0 <= s <= 1]
         if bad or not p.sigma_p:
             raise ValueError(f"{src}: protocol.sigma_p must be a non-empty list in [0, 1], got {p.sigma_p}")
-        for name in ("sweep_n_per_class", "cnn_n_per_class", "cnn_epochs", "tsaug_n_per_class", "tsaug_epochs",
+        if p.cnn_seeds > 64:
+            raise ValueError(f"{src}: protocol.cnn_seeds = {p.cnn_seeds}: at most 64 training runs per CNN")
+        for name in ("cnn_seeds", "sweep_n_per_class", "cnn_n_per_class", "cnn_epochs", "tsaug_n_per_class",
+                     "tsaug_epochs",
                      "calibration_max_steps", "calibration_starts", "calibration_fit_budget"):
             if getattr(p, name) < 1:
                 raise ValueError(f"{src}: protocol.{name} must be >= 1")

@@ -88,6 +88,57 @@ def _evaluate_all(clf, tests: dict, classes, n_boot: int, seed) -> dict:
     return out
 
 
+def calibrate_class(job: dict) -> dict:
+    """One class calibrated from its measurements (``profiles``) under ``acquisition``:
+    the posterior saved to ``out/posteriors/<cls>.nc``, its corner and trace plots to
+    ``out/figures/``; returns the stage's summary (plain data)."""
+    from pathlib import Path
+
+    from ..inference import calibrate
+    from ..inference.priors import engine_lines
+    from .style import figure_style
+
+    _threads(job.get("threads", 1))
+    t0 = time.perf_counter()
+    cls, out, X = job["cls"], Path(job["out"]), job["profiles"]
+    checkpoint = out / "posteriors" / f"{cls}.chain.h5"
+    res = calibrate(X, cls, acquisition=job["acquisition"], settings=job["settings"], random_state=job["seed"],
+                    backend_path=checkpoint)
+    nc = out / "posteriors" / f"{cls}.nc"
+    res.save(nc)
+    for f in checkpoint.parent.glob(checkpoint.name + "*"):
+        f.unlink()  # only needed to resume an interrupted run
+    corner_png, trace_png = out / "figures" / f"corner_{cls}.png", out / "figures" / f"trace_{cls}.png"
+    with figure_style():
+        res.plot_corner(corner_png)
+        res.plot_trace(trace_png)
+    lines = res.lines()  # (n, E, 4, 2): frequency rad/s, amplitude m
+    w_ref, _, _ = engine_lines(res.priors.centres)
+    return {"posterior": str(nc), "corner": str(corner_png), "trace": str(trace_png),
+            "converged": bool(res.converged), "diagnostics": res.diagnostics, "summary": res.summary(),
+            "n_profiles": int(len(X)), "acquisition": res.acquisition.to_dict(),
+            "measured_acquisition": res.measured_acquisition().to_dict(),
+            "lines": {"frequency_q": np.quantile(lines[..., 0], [0.05, 0.5, 0.95], axis=0).tolist(),
+                      "amplitude_q": np.quantile(lines[..., 1], [0.05, 0.5, 0.95], axis=0).tolist(),
+                      "reference_frequency": np.sort(w_ref, axis=-1).tolist()},
+            "seconds": time.perf_counter() - t0}
+
+
+def fit_predict(job: dict) -> dict:
+    """Train one classifier (``model``, ``seed``, ``params``) on (``X``, ``y``) and predict
+    every set of ``tests``: {train_seconds, predictions (encoded)}."""
+    from ..classify import make_classifier
+    from .statistics import encode
+
+    _threads(job.get("threads", 1))
+    clf = make_classifier(job["model"], random_state=job["seed"], **job.get("params", {}))
+    t0 = time.perf_counter()
+    clf.fit(job["X"], job["y"])
+    seconds = time.perf_counter() - t0
+    return {"train_seconds": seconds, "predictions": {n: encode(clf.predict(np.asarray(Xt)), job["classes"])
+                                                       for n, (Xt, _) in job["tests"].items()}}
+
+
 def candidate(job: dict) -> dict:
     """One choice candidate (a strategy at one sigma_P or width): its training set, the
     fast classifiers trained on it and scored on every set given (the selection set
@@ -110,22 +161,34 @@ def candidate(job: dict) -> dict:
 
 
 def train_and_test(job: dict) -> dict:
-    """Make a strategy's training set, train one classifier, test on every set given."""
+    """A strategy's training runs: make its training set once (from ``seed``), train one
+    classifier per run seed (``run_seeds``: weights, validation split and shuffles) on
+    it, predict every set given. Returns the runs' predictions (one string of class
+    indices per run and set, :func:`mdaug.reports.statistics.encode`), not their scores:
+    the study scores all runs of all classifiers on the same resamples."""
     from ..classify import make_classifier, save_model
+    from .statistics import encode
 
     _threads(job.get("threads", 1))
     t0 = time.perf_counter()
     X, y, groups = training_set(job["spec"], job["classes"], job["n_per_class"], job["seed"])
     t_data = time.perf_counter() - t0
-    params = dict(job.get("model_params", {}))
-    clf = make_classifier(job["model"], random_state=job["seed"], **params)
-    t1 = time.perf_counter()
-    clf.fit(X, y, **({} if groups is None else {"groups": groups}))
-    t_train = time.perf_counter() - t1
-    if job.get("model_path"):
-        save_model(clf, job["model_path"])
+    classes = sorted(job["classes"])
+    runs = []
+    for i, seed in enumerate(job.get("run_seeds") or [job["seed"]]):
+        clf = make_classifier(job["model"], random_state=seed, **dict(job.get("model_params", {})))
+        t1 = time.perf_counter()
+        clf.fit(X, y, **({} if groups is None else {"groups": groups}))
+        t_train = time.perf_counter() - t1
+        if job.get("model_path"):
+            save_model(clf, str(job["model_path"]).format(run=i))
+        runs.append({"seed": int(seed), "train_seconds": t_train,
+                     "epochs_run": (getattr(clf, "split_scores_", None) or {}).get("epochs_run"),
+                     "predictions": {name: encode(clf.predict(np.asarray(Xt)), classes)
+                                     for name, (Xt, _) in job["tests"].items()}})
     spec = {k: v for k, v in job["spec"].items() if k not in ("profiles", "labels")}
-    return {"strategy": job["name"], "model": job["model"], "n_train": int(len(y)), "spec": spec,
-            "sigma_p": spec.get("sigma_p"), "width": spec.get("width"), "data_seconds": t_data,
-            "train_seconds": t_train,
-            "tests": _evaluate_all(clf, job["tests"], job["classes"], job["n_boot"], job["seed"])}
+    return {"strategy": job["name"], "model": job["model"], "spec": spec, "sigma_p": spec.get("sigma_p"),
+            "width": spec.get("width"), "seeds": [r["seed"] for r in runs], "n_train": int(len(y)),
+            "data_seconds": t_data, "train_seconds": float(sum(r["train_seconds"] for r in runs)),
+            "runs": [{k: v for k, v in r.items() if k != "predictions"} for r in runs],
+            "predictions": {t: [r["predictions"][t] for r in runs] for t in runs[0]["predictions"]}}

@@ -5,22 +5,33 @@ The command line is ``tests/benchmarks/readme_table.py``::
 
     python tests/benchmarks/readme_table.py mdaug-study            # print the section
     python tests/benchmarks/readme_table.py mdaug-study --write    # put it in README.md
-    python tests/benchmarks/readme_table.py mdaug-study --check    # exit 1 if README.md differs
+    python tests/benchmarks/readme_table.py mdaug-study --check    # exit 1 if a rerun disagrees
 
 The section sits in README.md between :data:`BEGIN` and :data:`END`. It quotes the
 ``mdaug run`` command that gives the results (seed included) and refuses results whose
 configuration that command would not give (other sizes, a config file: their table
-would be for another command).
+would be for another command). Its sentences and verdicts are the report's
+(:mod:`.finding`, :mod:`.verdicts`).
+
+What a check accepts (:func:`check_readme`): a rerun of the quoted command whose every
+figure in the table (each strategy's and the ceiling's mean balanced accuracy,
+accuracy and class recalls) lies within the interval the README quotes for it. The
+same machine and library versions give identical files; another CPU rounds
+differently, the training runs take other paths, and the figures move within the
+quoted intervals, which cover the test sample and the training runs.
 """
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import json
+import re
 from pathlib import Path
 
-from .report import Text, assess, ceiling_best, command, finding, fmt, main_test, majority, set_counts, \
-    setting_text, verdict
+from .finding import command, finding
+from .markup import Text
+from .numbers import decimals, fmt, spread
+from .page_strategies import choice_mark, setting_text
+from .verdicts import judge, label
 
 BEGIN = "<!-- results:begin -->"
 END = "<!-- results:end -->"
@@ -61,12 +72,31 @@ def check_command(results: dict) -> str:
     return command(results)
 
 
+def _cells(w, m: dict, classes) -> list[str]:
+    """The figures of one row: balanced accuracy, the runs, accuracy, recalls."""
+    ci = m.get("ci") or {}
+    bal_ci = ci.get("balanced_accuracy")
+    runs = m.get("n_runs") or 1
+    cells = [w.val_ci(None, m["balanced_accuracy"], None, bal_ci),
+             spread(m.get("seed_spread"), decimals(bal_ci)) + f" ({runs})" if runs > 1 else "1 run",
+             w.val_ci(None, m["accuracy"], None, ci.get("accuracy"))]
+    for c in classes:
+        r = (m["per_class"].get(c) or {}).get("recall")
+        cells.append(w.val_ci(None, r, None, ((ci.get("per_class") or {}).get(c) or {}).get("recall")))
+    return cells
+
+
+COLUMNS = ("balanced accuracy", "runs: lowest–highest (number)", "accuracy")
+
+
 def results_section(results: dict) -> str:
     """The README's results section (markdown, between the markers) for ``results``."""
     cmd = check_command(results)
     w = Text()
+    j = judge(results)
     classes = list(results["config"]["classes"])
-    test = main_test(results)
+    test = j["test"]
+    runs = results["config"]["protocol"].get("cnn_seeds", 1)
     lines = [BEGIN,
              "<!-- written by `python tests/benchmarks/readme_table.py DIR --write` from DIR/results.json of the "
              "command below; `--check` verifies it; do not edit by hand -->",
@@ -80,36 +110,31 @@ def results_section(results: dict) -> str:
              + ("; simulated scene" if results["simulated"] else "")
              + f"; acquisition: {results['acquisition_text']}.",
              "",
-             " ".join(finding(results, w)),
+             " ".join(finding(results, w, j)),
              ""]
     if test is not None:
-        counts = set_counts(results, test)
-        always = majority(results, test)
+        counts = j["sets"][test]["counts"]
+        always = j["sets"][test]["majority"]
         lines.append(f"CNN per strategy on the '{test}' set ({sum(counts.values())} acquisitions: "
-                     + ", ".join(f"{n} {c}" for c, n in counts.items()) + "), 95% bootstrap intervals"
+                     + ", ".join(f"{n} {c}" for c, n in counts.items()) + f"), the mean of {runs} training runs "
+                     "(seeds) with a 95% interval covering the test sample and the training runs"
                      + (f"; always answering {always[0]} scores accuracy {always[1]:.2f}" if always else "") + ":")
         lines.append("")
-        head = ["strategy", "setting", "balanced accuracy", "accuracy", *(f"recall {c}" for c in classes), "verdict"]
+        head = ["strategy", "setting", *COLUMNS, *(f"recall {c}" for c in classes), "verdict"]
         lines.append("| " + " | ".join(head) + " |")
         lines.append("|" + "|".join("---" for _ in head) + "|")
-        best = (results.get("best_strategy") or {}).get("name")
-
-        def row(name, setting, m, label_verdict=True):
-            ci = m.get("ci") or {}
-            cells = [name, setting, w.val_ci(None, m["balanced_accuracy"], None, ci.get("balanced_accuracy")),
-                     w.val_ci(None, m["accuracy"], None, ci.get("accuracy"))]
-            for c in classes:
-                r = (m["per_class"].get(c) or {}).get("recall")
-                cells.append(w.val_ci(None, r, None, ((ci.get("per_class") or {}).get(c) or {}).get("recall")))
-            cells.append(verdict(assess(m, classes, always), w) if label_verdict else "")
-            lines.append("| " + " | ".join(cells) + " |")
-
+        verdicts = j["sets"][test]["results"]
         for name, s in results["strategies"].items():
             if test in s["tests"]:
-                row(name + (" (chosen)" if name == best else ""), setting_text(results, name), s["tests"][test])
-        ceil = ceiling_best(results, test)
-        if ceil:
-            row(f"ceiling: {ceil[0]} trained on the simulator's own data", "–", ceil[1])
+                cells = [name + choice_mark(j, name), setting_text(results, name),
+                         *_cells(w, s["tests"][test], classes), label(verdicts[name])]
+                lines.append("| " + " | ".join(cells) + " |")
+        ceil = j.get("ceiling")
+        if ceil and test in results["ceiling"]["models"][ceil["model"]]["tests"]:
+            v = j["sets"][test]["ceiling"]
+            cells = [f"ceiling: {ceil['model']} trained on the simulator's own data (chosen on the selection set)",
+                     "–", *_cells(w, results["ceiling"]["models"][ceil["model"]]["tests"][test], classes), label(v)]
+            lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
     cal = ["Calibration: " + "; ".join(
         f"{c} {'converged' if v['converged'] else 'NOT converged'} (chain "
@@ -135,10 +160,47 @@ def current_section(text: str) -> str:
     return text[a:b + len(END)]
 
 
+_FIGURE = re.compile(r"^(-?\d+(?:\.\d+)?) \[(-?\d+(?:\.\d+)?), (-?\d+(?:\.\d+)?)\]$")
+
+
+def table_rows(section: str) -> dict[str, list[str]]:
+    """{row name: cells} of the section's markdown table (name without its choice mark)."""
+    rows = {}
+    for line in section.splitlines():
+        if line.startswith("| ") and not line.startswith("| strategy |"):
+            cells = [c.strip() for c in line.strip().strip("|").split(" | ")]
+            rows[re.sub(r" \((chosen|tied choice)\)$", "", cells[0])] = cells
+    return rows
+
+
 def check_readme(text: str, results: dict) -> list[str]:
-    """Differences (unified diff lines) between README ``text``'s results section and the
-    section ``results`` give; [] when they agree."""
-    have, want = current_section(text), results_section(results)
-    if have == want:
-        return []
-    return list(difflib.unified_diff(have.splitlines(True), want.splitlines(True), "README.md", "results.json"))
+    """Why the README's results section does not hold for ``results`` ([] when it does):
+    the quoted command must be the one that made them, and every figure of the table
+    (the rerun's value, at the README's precision) must lie within the interval the
+    README quotes for it."""
+    have = current_section(text)
+    want = results_section(results)
+    problems = []
+    cmd = check_command(results)
+    if f"```bash\n{cmd}\n```" not in have:
+        problems.append(f"the README quotes another command than `{cmd}`\n")
+    quoted, rerun = table_rows(have), table_rows(want)
+    if set(quoted) != set(rerun):
+        problems.append(f"the table's rows differ: README {sorted(quoted)}, rerun {sorted(rerun)}\n")
+    head = next((ln for ln in want.splitlines() if ln.startswith("| strategy |")), "")
+    names = [c.strip() for c in head.strip().strip("|").split(" | ")]
+    for row in sorted(set(quoted) & set(rerun)):
+        for col, q, r in zip(names, quoted[row], rerun[row]):
+            mq, mr = _FIGURE.match(q), _FIGURE.match(r)
+            if not mq:
+                continue
+            if not mr:
+                problems.append(f"{row}, {col}: README {q}, rerun {r}\n")
+                continue
+            lo, hi = float(mq.group(2)), float(mq.group(3))
+            d = len(mq.group(1).split(".")[1]) if "." in mq.group(1) else 0
+            value = float(mr.group(1))
+            tol = 0.5 * 10.0 ** -d  # the rerun's value is rounded like the README's
+            if not lo - tol <= value <= hi + tol:
+                problems.append(f"{row}, {col}: rerun {mr.group(1)} outside the README's interval [{lo}, {hi}]\n")
+    return problems

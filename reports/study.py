@@ -17,11 +17,18 @@ Stages (each cached in ``DIR/stages`` so an interrupted run resumes):
    selection set (the choice never sees a test set; the published peeking choice
    of sigma_P is recorded beside it, labelled as such).
 5. ``cnn_<strategy>``: the CNN trained on each strategy at its chosen setting,
-   scored on the selection and test sets; the best strategy is the one with the best
-   balanced accuracy on the selection set.
+   ``protocol.cnn_seeds`` times (training runs, :mod:`.study_training`), predicting
+   the selection and test sets; the best strategy is the one with the best mean
+   balanced accuracy on the selection set (strategies within a tie of it are reported
+   as tied, :mod:`.verdicts`).
 6. ``ceiling``: simulated scenes: classifiers trained on the scene simulator's own
-   data (other specimens): the separability ceiling of the acquisition.
+   data (other specimens): the separability ceiling of the acquisition; its model is
+   chosen on the selection set.
 7. ``speed``: speed against error of the stages.
+
+Then every classifier's runs are scored on the same resamples of each set
+(:mod:`.statistics`: means over the runs, intervals covering the test sample and the
+training runs, paired differences) and every verdict is made (:mod:`.verdicts`).
 """
 from __future__ import annotations
 
@@ -34,14 +41,11 @@ import numpy as np
 
 from ..radar import atomic_savez, atomic_write, load_profiles
 from ..radar.seeds import child_seed
-from . import jobs
+from . import jobs, statistics, verdicts
 from .cache import StageCache, settings_key
 from .config import StudyConfig
 from .executor import make_executor
-
-PARAMETER = {"sigma_p_published": "sigma_p", "sigma_p_fit": "sigma_p", "posterior": None,
-             "posterior_specimens": "width", "tsaug": None}
-"""The setting each strategy's choice is about (None: nothing to choose)."""
+from .study_training import PARAMETER, TrainingStages
 
 STRATEGY_TEXT = {
     "sigma_p_published": "the published method: sigma_P around the packaged class reference, one chirp at its "
@@ -56,20 +60,16 @@ STRATEGY_TEXT = {
     "tsaug": "tsaug (drift, pool, reverse) on the calibration measurements; assumes new drones look like "
              "distorted copies of the measured ones",
 }
-TIE = 0.01  # balanced accuracy within this of the best counts as a tie
-TIE_RULE = {"sigma_p": "smaller", "width": "larger"}
-"""How ties go: the smaller sigma_P (the published rule), the larger specimen width
-(the selection set holds only the calibrated drone, which cannot tell how much new
-drones differ: among equals, assume more variation)."""
-
-
 def _stage_seed(cfg: StudyConfig, *keys) -> int:
     return child_seed(cfg.seed, *keys)
 
 
-class Study:
-    def __init__(self, cfg: StudyConfig, out: Path, log=print):
+class Study(TrainingStages):
+    """``invocation``: the command line as it was run (the report prints it)."""
+
+    def __init__(self, cfg: StudyConfig, out: Path, log=print, invocation: str | None = None):
         self.cfg = cfg.validate(check_files=False)
+        self.invocation = invocation
         self.out = Path(out)
         self.out.mkdir(parents=True, exist_ok=True)
         for sub in ("data", "posteriors", "models", "figures"):
@@ -84,6 +84,7 @@ class Study:
                                                                      "through_chain", "normalisation", "n_boot")])
         self.cnn_key = settings_key(self.cand_key, [p[k] for k in ("cnn_n_per_class", "cnn_epochs", "cnn_patience",
                                                                    "tsaug_n_per_class", "tsaug_epochs")])
+        # the key without n_boot: the stages store predictions, scored afterwards
 
     # ---- stage 1: data -------------------------------------------------------------
     def data(self) -> dict:
@@ -180,43 +181,30 @@ class Study:
                 if not name.startswith("calibration_") and name != "select"}
 
     # ---- stage 2: calibration --------------------------------------------------------
+    def _calibration_job(self, cls: str, acquisition) -> dict:
+        from ..inference import CalibrationSettings
+
+        p = self.cfg.protocol
+        base = CalibrationSettings.quick() if self.cfg.quick else CalibrationSettings()
+        settings = base.replace(time_budget=p.calibration_time_budget, n_starts=p.calibration_starts,
+                                fit_budget=p.calibration_fit_budget, n_acquisitions=p.calibration_draws,
+                                ramps_drawn=p.calibration_ramps_drawn, max_steps=p.calibration_max_steps,
+                                check_every=min(base.check_every, p.calibration_max_steps))
+        return {"cls": cls, "profiles": self.load_set(f"calibration_{cls}")[0], "acquisition": acquisition,
+                "settings": settings, "seed": _stage_seed(self.cfg, "calibrate", cls), "out": str(self.out)}
+
     def calibrate(self, cls: str, acquisition) -> dict:
-        from ..inference import CalibrationSettings, calibrate
-        from ..inference.priors import engine_lines
+        return self.cache.run(f"calibrate_{cls}", settings_key(self.calib_key, cls),
+                              lambda: _jsonable(jobs.calibrate_class(self._calibration_job(cls, acquisition))))
 
-        def compute():
-            X, _ = self.load_set(f"calibration_{cls}")
-            p = self.cfg.protocol
-            base = CalibrationSettings.quick() if self.cfg.quick else CalibrationSettings()
-            settings = base.replace(time_budget=p.calibration_time_budget, n_starts=p.calibration_starts,
-                                    fit_budget=p.calibration_fit_budget, n_acquisitions=p.calibration_draws,
-                                    ramps_drawn=p.calibration_ramps_drawn, max_steps=p.calibration_max_steps,
-                                    check_every=min(base.check_every, p.calibration_max_steps))
-            checkpoint = self.out / "posteriors" / f"{cls}.chain.h5"
-            res = calibrate(X, cls, acquisition=acquisition, settings=settings,
-                            random_state=_stage_seed(self.cfg, "calibrate", cls), backend_path=checkpoint)
-            nc = self.out / "posteriors" / f"{cls}.nc"
-            res.save(nc)
-            for f in checkpoint.parent.glob(checkpoint.name + "*"):
-                f.unlink()  # only needed to resume an interrupted run
-            corner_png = self.out / "figures" / f"corner_{cls}.png"
-            trace_png = self.out / "figures" / f"trace_{cls}.png"
-            from .style import figure_style
-
-            with figure_style():
-                res.plot_corner(corner_png)
-                res.plot_trace(trace_png)
-            lines = res.lines()  # (n, E, 4, 2): frequency rad/s, amplitude m
-            w_ref, a_ref, _ = engine_lines(res.priors.centres)
-            return {"posterior": str(nc), "corner": str(corner_png), "trace": str(trace_png),
-                    "converged": bool(res.converged), "diagnostics": _jsonable(res.diagnostics),
-                    "summary": _jsonable(res.summary()), "n_profiles": int(len(X)),
-                    "acquisition": res.acquisition.to_dict(),
-                    "measured_acquisition": res.measured_acquisition().to_dict(),
-                    "lines": {"frequency_q": np.quantile(lines[..., 0], [0.05, 0.5, 0.95], axis=0).tolist(),
-                              "amplitude_q": np.quantile(lines[..., 1], [0.05, 0.5, 0.95], axis=0).tolist(),
-                              "reference_frequency": np.sort(w_ref, axis=-1).tolist()}}
-        return self.cache.run(f"calibrate_{cls}", settings_key(self.calib_key, cls), compute)
+    def calibrations(self, acquisition, executor) -> dict:
+        """Every class calibrated (cached); with workers, the uncached classes at once."""
+        todo = [c for c in self.cfg.classes if not self.cache.has(f"calibrate_{c}", settings_key(self.calib_key, c))]
+        if len(todo) > 1 and self.cfg.workers > 1:
+            work = [self._calibration_job(c, acquisition) for c in todo]
+            for c, res in zip(todo, executor.map(jobs.calibrate_class, work)):
+                self.cache.store(f"calibrate_{c}", settings_key(self.calib_key, c), _jsonable(res), res["seconds"])
+        return {c: self.calibrate(c, acquisition) for c in self.cfg.classes}
 
     # ---- stages 3-4: candidates and the choice ---------------------------------------------
     def specs(self, calib: dict, tsaug_sources) -> dict:
@@ -273,58 +261,8 @@ class Study:
 
     @staticmethod
     def choose(rows: list[dict], strategy: str, on: str) -> dict:
-        """The value of ``strategy``'s setting with the best mean balanced accuracy (over
-        the fast classifiers) on set ``on``; ties (within TIE) go by TIE_RULE."""
-        param = PARAMETER[strategy]
-        by_value: dict[float, list[float]] = {}
-        for r in rows:
-            if r["strategy"] == strategy and r["set"] == on:
-                by_value.setdefault(float(r["value"]), []).append(r["balanced_accuracy"])
-        if not by_value:
-            return {"value": None, "set": on, "scores": {}}
-        means = {v: float(np.mean(s)) for v, s in sorted(by_value.items())}
-        best = max(means.values())
-        tied = [v for v, m in means.items() if m >= best - TIE]
-        value = min(tied) if TIE_RULE.get(param) == "smaller" else max(tied)
-        return {"value": value, "parameter": param, "set": on, "scores": means, "rule": f"best mean balanced "
-                f"accuracy of {', '.join(sorted({r['model'] for r in rows}))}; ties within {TIE} to the "
-                f"{TIE_RULE.get(param)} {param}"}
-
-    # ---- stage 5: CNN per strategy -------------------------------------------------------------
-    def cnn_jobs(self, specs: dict, choice: dict, select, tests: dict) -> list[dict]:
-        p = self.cfg.protocol
-        sel_name, sel_data, _ = select
-        out = []
-        for name, ss in specs.items():
-            param = PARAMETER[name]
-            spec = ss[0] if param is None else next(s for s in ss if s[param] == choice[name]["value"])
-            tsaug = name == "tsaug"
-            job = {"name": name, "model": "cnn", "classes": list(self.cfg.classes), "spec": spec,
-                   "n_per_class": p.tsaug_n_per_class if tsaug else p.cnn_n_per_class,
-                   "tests": {sel_name: sel_data, **tests} if not tsaug else
-                   {k: v for k, v in {sel_name: sel_data, **tests}.items() if k != "calibration"},
-                   "n_boot": p.n_boot, "seed": _stage_seed(self.cfg, "cnn", name),
-                   "model_params": {"epochs": p.tsaug_epochs if tsaug else p.cnn_epochs, "patience": p.cnn_patience,
-                                    "normalisation": p.normalisation},
-                   "model_path": str(self.out / "models" / f"cnn_{name}.zip")}
-            out.append(job)
-        return out
-
-    def _cnn_key(self, job: dict) -> str:
-        spec = {k: v for k, v in job["spec"].items() if k not in ("profiles", "labels")}
-        return settings_key(self.cnn_key, job["name"], spec)
-
-    def cnn(self, job: dict) -> dict:
-        return self.cache.run(f"cnn_{job['name']}", self._cnn_key(job), lambda: _jsonable(jobs.train_and_test(job)))
-
-    @staticmethod
-    def best_strategy(strategies: dict, on: str) -> dict:
-        """The strategy whose CNN has the best balanced accuracy on the selection set."""
-        scores = {n: s["tests"][on]["balanced_accuracy"] for n, s in strategies.items() if on in s["tests"]}
-        if not scores:
-            return {"name": None, "set": on, "scores": {}}
-        best = max(scores, key=lambda n: scores[n])
-        return {"name": best, "set": on, "scores": scores}
+        """The value of ``strategy``'s setting chosen on set ``on`` (:func:`.verdicts.choose_setting`)."""
+        return verdicts.choose_setting(rows, strategy, PARAMETER[strategy], on)
 
     # ---- figures -------------------------------------------------------------------------------
     def profiles_figure(self, specs: dict, choice: dict, tests: dict) -> str:
@@ -349,41 +287,6 @@ class Study:
         return self.cache.run("profiles_figure", settings_key(self.cnn_key, sorted(
             (k, v.get("value")) for k, v in choice.items())), compute)
 
-    # ---- stage 6: separability ceiling --------------------------------------------------------------
-    def ceiling(self, tests: dict, select) -> dict:
-        from ..classify import evaluate, make_classifier
-        from ..generator.chain_path import render_through_chain
-        from ..generator.scene import SceneConfig, draw_specimens
-        from ..generator import load_reference
-
-        sim, p = self.cfg.simulation, self.cfg.protocol
-
-        def compute():
-            scene = SceneConfig(n_ramps=sim.ramps)
-            parts, labels = [], []
-            for c in self.cfg.classes:
-                rng = np.random.default_rng(_stage_seed(self.cfg, "ceiling", c))
-                specimens = draw_specimens(load_reference(c).to_array(), 2 * sim.new_specimens, scene, rng)
-                x = specimens[np.arange(sim.ceiling_per_class) % len(specimens)]
-                parts.append(render_through_chain(x, scene, random_state=_stage_seed(self.cfg, "ceiling-chain", c)).profiles)
-                labels.append(np.full(sim.ceiling_per_class, c))
-            X, y = np.concatenate(parts), np.concatenate(labels)
-            sel_name, sel_data, _ = select
-            result = {"n_train": int(len(y)), "models": {}, "what": "trained on the scene simulator's own data "
-                      f"({sim.ceiling_per_class} acquisitions per class of {2 * sim.new_specimens} other specimens, "
-                      "through the chain's reduced computation)"}
-            for model in ("svm", "xgb", "nb", "cnn"):  # the CNN: like for like with the strategies' CNNs
-                params = {"epochs": p.cnn_epochs, "patience": p.cnn_patience} if model == "cnn" else {}
-                clf = make_classifier(model, random_state=_stage_seed(self.cfg, "ceiling", model), **params)
-                t0 = time.perf_counter()
-                clf.fit(X, y)
-                result["models"][model] = {
-                    "train_seconds": time.perf_counter() - t0,
-                    "tests": {n: evaluate(yt, clf.predict(Xt), labels=sorted(self.cfg.classes), n_boot=p.n_boot,
-                                          random_state=0) for n, (Xt, yt) in {sel_name: sel_data, **tests}.items()}}
-            return result
-        return self.cache.run("ceiling", settings_key(self.key, p.n_boot, sim.ceiling_per_class), compute)
-
     # ---- stage 7: speed against error -----------------------------------------------------------------
     def speed(self, acquisition) -> dict:
         from .speed import stage_speed
@@ -401,7 +304,7 @@ class Study:
             self.log(f"acquisition: {acq.describe()}")
             tests = self.test_sets(index)
             select = self.selection_set(index)
-            calib = {c: self.calibrate(c, acq) for c in self.cfg.classes}
+            calib = self.calibrations(acq, executor)
             tsaug_src = [self.load_set(f"calibration_{c}") for c in self.cfg.classes]
             specs = self.specs(calib, (np.concatenate([s[0] for s in tsaug_src]),
                                        np.concatenate([s[1] for s in tsaug_src])))
@@ -413,29 +316,30 @@ class Study:
                 if "sigma_p_published" in specs else None
             for n, c in choice.items():
                 self.log(f"choice [{n}]: {c['parameter']} = {c['value']} (on '{sel_name}')")
-            cnn_jobs = self.cnn_jobs(specs, choice, select, tests)
-            todo = [j for j in cnn_jobs if not self.cache.has(f"cnn_{j['name']}", self._cnn_key(j))]
-            if len(todo) > 1 and self.cfg.workers > 1:
-                for job, res in zip(todo, executor.map(jobs.train_and_test, todo)):
-                    self.cache.store(f"cnn_{job['name']}", self._cnn_key(job), _jsonable(res),
-                                     res["data_seconds"] + res["train_seconds"])
-            strategies = {j["name"]: self.cnn(j) for j in cnn_jobs}
-            best = self.best_strategy(strategies, sel_name)
+            strategies = self.cnns(self.cnn_jobs(specs, choice, select, tests), executor)
             figure = self.profiles_figure(specs, choice, tests)
-            ceiling = self.ceiling(tests, select) if self.cfg.simulated else None
+            ceiling = self.ceiling(tests, select, executor) if self.cfg.simulated else None
             speed = self.speed(acq)
         finally:
             executor.close()
+        classes = list(self.cfg.classes)
+        truth = {sel_name: statistics.truth(select[1][1], sorted(classes)),
+                 **{n: statistics.truth(yt, sorted(classes)) for n, (_, yt) in tests.items()}}
         results = {
-            "config": self.cfg.to_dict(), "simulated": self.cfg.simulated,
+            "config": self.cfg.to_dict(), "invocation": self.invocation, "simulated": self.cfg.simulated,
             "data": index["sets"], "acquisition": index["acquisition"], "acquisition_text": acq.describe(),
             "selection": {"set": sel_name, "what": select[2]},
             "calibration": calib, "candidates": cand, "choice": choice, "published_peeking_choice": published_peeking,
-            "strategies": strategies, "strategy_text": {n: STRATEGY_TEXT[n] for n in strategies},
-            "best_strategy": best, "ceiling": ceiling, "speed": speed, "profiles_figure": figure,
+            "truth": truth, "strategies": _jsonable(strategies), "strategy_text": {n: STRATEGY_TEXT[n] for n in strategies},
+            "ceiling": _jsonable(ceiling), "speed": speed, "profiles_figure": figure,
             "timings": dict(self.cache.timings), "resumed_stages": list(self.cache.resumed),
             "total_seconds": time.perf_counter() - t_start,
         }
+        statistics.score_study(results)
+        results["best_strategy"] = verdicts.best_strategy(results["strategies"], sel_name)
+        if ceiling is not None:
+            results["ceiling"]["chosen"] = verdicts.ceiling_choice(results["ceiling"]["models"], sel_name)
+        results["verdicts"] = verdicts.judge(results)
         text = json.dumps(_jsonable(results), indent=1)
         atomic_write(self.out / "results.json", lambda fh: fh.write(text.encode()))
         from .report import write_report

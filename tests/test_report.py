@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from mdaug.classify import evaluate
-from mdaug.reports import figures
+from mdaug.reports import figures, statistics, verdicts
 from mdaug.reports.config import StudyConfig
 from mdaug.reports.readme import BEGIN, END, README, check_readme, current_section, replace_section, results_section
 from mdaug.reports.report import SECTIONS, command, decimals, get, write_report
@@ -31,6 +31,22 @@ def _predictions(n_heli, n_quad, recall_heli, recall_quad, rng):
         wrong = rng.choice(idx, size=int(round((1 - r) * n)), replace=False)
         p[wrong] = other
     return y, p
+
+
+SIZES = {"select": (12, 12), "new": (44, 92), "new_large": (176, 368)}
+
+
+def _runs(recall_heli, recall_quad, set_name, seed, n_runs=3, step=0.03):
+    """Encoded predictions of n_runs training runs on a set (recalls moved by +-step
+    from run to run, except 0 and 1, which every run keeps: a degenerate class stays so)."""
+    out = []
+    for i in range(n_runs):
+        d = step * (i - (n_runs - 1) / 2)
+        rh = recall_heli if recall_heli in (0.0, 1.0) else min(max(recall_heli + d, 0), 1)
+        rq = recall_quad if recall_quad in (0.0, 1.0) else min(max(recall_quad - d, 0), 1)
+        _, p = _predictions(*SIZES[set_name], rh, rq, np.random.default_rng(1000 * seed + i))
+        out.append(statistics.encode(p, CLASSES))
+    return out
 
 
 def _metrics(recall_heli, recall_quad, n_heli=44, n_quad=92, seed=0):
@@ -62,17 +78,18 @@ def synthetic_results(folder: Path, sbc: bool = False) -> dict:
                "posterior_specimens": (0.8, 0.82), "tsaug": (0.0, 1.0)}
     settings = {"sigma_p_published": ("sigma_p", 0.3), "sigma_p_fit": ("sigma_p", 0.1),
                 "posterior_specimens": ("width", 1.0)}
+    select = {"sigma_p_published": (0.4, 0.9), "sigma_p_fit": (0.8, 0.85), "posterior": (0.6, 0.6),
+              "posterior_specimens": (0.9, 0.9), "tsaug": (0.2, 1.0)}
     strategies = {}
     for i, (name, (rh, rq)) in enumerate(recalls.items()):
         param = settings.get(name)
         strategies[name] = {
             "strategy": name, "model": "cnn", "n_train": 12000, "spec": {"strategy": name},
             "sigma_p": param[1] if param and param[0] == "sigma_p" else None,
-            "width": param[1] if param and param[0] == "width" else None,
+            "width": param[1] if param and param[0] == "width" else None, "seeds": [11, 12, 13],
             "data_seconds": 3.0 + i, "train_seconds": 40.0 + 7 * i,
-            "tests": {"select": _metrics(min(rh + 0.05, 1), rq, 12, 12, seed=i),
-                      "new": _metrics(rh, rq, seed=10 + i),
-                      "new_large": _metrics(rh, rq, 176, 368, seed=20 + i)}}
+            "predictions": {"select": _runs(*select[name], "select", i),
+                            "new": _runs(rh, rq, "new", 10 + i), "new_large": _runs(rh, rq, "new_large", 20 + i)}}
     rows = []
     for name, (param, _) in settings.items():
         values = cfg.protocol.sigma_p if param == "sigma_p" else cfg.protocol.specimen_widths
@@ -119,10 +136,12 @@ def synthetic_results(folder: Path, sbc: bool = False) -> dict:
         return out
 
     ceiling = {"n_train": 2000, "what": "trained on the scene simulator's own data (1000 acquisitions per class)",
-               "models": {m: {"train_seconds": t, "tests": {"select": _metrics(0.9, 0.9, 12, 12, seed=40 + j),
-                                                           "new": _metrics(0.85, 0.8, seed=50 + j),
-                                                           "new_large": _metrics(0.85, 0.8, 176, 368, seed=60 + j)}}
-                          for j, (m, t) in enumerate((("svm", 2.0), ("xgb", 5.0), ("nb", 0.01)))}}
+               "models": {m: {"train_seconds": t, "seeds": list(range(k)),
+                              "predictions": {"select": _runs(0.95, 0.95, "select", 40 + j, k),
+                                              "new": _runs(0.85, 0.8, "new", 50 + j, k),
+                                              "new_large": _runs(0.85, 0.8, "new_large", 60 + j, k)}}
+                          for j, (m, t, k) in enumerate((("svm", 2.0, 1), ("xgb", 5.0, 1), ("nb", 0.01, 1),
+                                                         ("cnn", 30.0, 3)))}}
     speed = {"rows": [
         {"stage": "generator", "setting": "f(x) QUAD float64", "seconds": 0.3, "rate": "6,600 profiles/s",
          "error": 0.0, "error_metric": "max |profile - float64| (peak = 1)"},
@@ -140,7 +159,8 @@ def synthetic_results(folder: Path, sbc: bool = False) -> dict:
             "select": {"path": "x", "n": 24, "per_class": {"HELI": 12, "QUAD": 12}},
             "new": {"path": "x", "n": 136, "per_class": {"HELI": 44, "QUAD": 92}},
             "new_large": {"path": "x", "n": 544, "per_class": {"HELI": 176, "QUAD": 368}}}
-    sel_scores = {n: s["tests"]["select"]["balanced_accuracy"] for n, s in strategies.items()}
+    truth = {t: statistics.truth(_predictions(*n, 1, 1, np.random.default_rng(0))[0], CLASSES)
+             for t, n in SIZES.items()}
     results = {
         "config": json.loads(json.dumps(cfg.to_dict())), "simulated": True, "data": data,
         "acquisition": {"ramps": 32, "phases": "uniform", "carrier": [0.0, 0.3], "noise_db": [-48.0, -42.0]},
@@ -149,10 +169,12 @@ def synthetic_results(folder: Path, sbc: bool = False) -> dict:
         "calibration": {"HELI": calibration("HELI", 1), "QUAD": calibration("QUAD", 4)},
         "candidates": {"rows": rows, "selection_set": "select"}, "choice": choice,
         "published_peeking_choice": {"value": 0.0, "parameter": "sigma_p", "set": "new", "scores": {"0.0": 0.5}},
-        "strategies": strategies, "strategy_text": {n: STRATEGY_TEXT[n] for n in strategies},
-        "best_strategy": {"name": max(sel_scores, key=sel_scores.get), "set": "select", "scores": sel_scores},
-        "ceiling": ceiling, "speed": speed, "profiles_figure": _png(folder / "figures" / "profiles.png"),
+        "truth": truth, "strategies": strategies, "strategy_text": {n: STRATEGY_TEXT[n] for n in strategies},
+        "invocation": "mdaug run --out /data/my-study", "ceiling": ceiling, "speed": speed, "profiles_figure": _png(folder / "figures" / "profiles.png"),
         "timings": {"data": 40.0, "calibrate_HELI": 250.0}, "resumed_stages": ["data"], "total_seconds": 900.0}
+    results = statistics.score_study(json.loads(json.dumps(results)))
+    results["best_strategy"] = verdicts.best_strategy(results["strategies"], "select")
+    results["ceiling"]["chosen"] = verdicts.ceiling_choice(results["ceiling"]["models"], "select")
     return json.loads(json.dumps(results))  # as read back from results.json (NaN, Infinity included)
 
 
@@ -221,7 +243,7 @@ def test_degenerate_and_chance_are_labelled_and_undefined_precision_is_a_dash(re
         assert "degenerate: recognises no HELI (never predicts HELI)" in rows[name]
         assert "no better than always answering QUAD (0.68)" in rows[name]
         cells = re.findall(r"<td[^>]*>(.*?)</td>", rows[name], flags=re.S)
-        assert cells[5] == "–"  # precision HELI: HELI is never predicted
+        assert cells[6] == "–"  # precision HELI: HELI is never predicted
     assert "not better than chance" in rows["posterior"]
     assert "degenerate" not in rows["sigma_p_fit"] and "chance" not in rows["sigma_p_fit"]
     assert "always answering QUAD scores accuracy 0.68" in visible_text(page)
@@ -349,20 +371,25 @@ def test_readme_results_section_belongs_to_the_quick_start_command():
 
 
 @pytest.mark.slow
-def test_readme_table_is_what_the_quoted_command_writes(tmp_path):
-    """The full default study (about 15 minutes; MDAUG_STUDY_DIR=DIR checks a finished
-    run's DIR/results.json instead) against the README's section."""
+def test_readme_table_check_accepts_a_rerun_of_the_quoted_command(tmp_path, capsys):
+    """The full default study (MDAUG_STUDY_DIR=DIR checks a finished run's
+    DIR/results.json instead), checked against the README's section by
+    `tests/benchmarks/readme_table.py DIR --check`: every figure of the rerun within the
+    interval the README quotes for it."""
+    import importlib.util
     import os
 
     from mdaug.cli import main
-    from mdaug.reports.readme import load_results
 
     folder = os.environ.get("MDAUG_STUDY_DIR")
     if folder is None:
         folder = tmp_path / "mdaug-study"
         assert main(["run", "--quiet", "--out", str(folder)]) in (0, 1)
-    diff = check_readme(README.read_text(), load_results(folder))
-    assert not diff, "".join(diff)
+    spec = importlib.util.spec_from_file_location("readme_table", ROOT / "tests" / "benchmarks" / "readme_table.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    status = mod.main([str(folder), "--check"])
+    assert status == 0, capsys.readouterr().out
 
 
 # ---- screenshots ----------------------------------------------------------------------------------

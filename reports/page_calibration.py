@@ -1,0 +1,125 @@
+"""The report's "Calibration" section: per class, convergence, the sampler, SBC, the
+label-free posterior of the vibration lines (figure and numbers), the acquisition as
+measured against as stated (far-outside levels flagged, :func:`.verdicts.nuisances`),
+the corner and trace plots."""
+from __future__ import annotations
+
+import html
+import os
+from pathlib import Path
+
+import numpy as np
+
+from . import figures
+from .markup import Figures, Html, details, img, table, td
+from .numbers import decimals, fmt, fmt_sig
+from .verdicts import FAR, nuisances
+
+
+def _sbc_text(cal: dict, w: Html) -> str:
+    sbc = cal.get("sbc")
+    if not sbc:
+        return "not run in the study (see README: SBC)."
+    share = sbc.get("outer_share")
+    p = sbc.get("pooled_p")
+    n = sbc.get("n_replicates")
+    ok = False
+    if share is not None and p is not None and n:
+        from scipy.stats import binom
+
+        lo, hi = binom.ppf([0.025, 0.975], int(n), 0.1) / int(n)  # an honest sampler's range of the share
+        ok = p > 0.05 and lo <= share <= hi
+    return (f"{fmt(n)} replicates: {fmt(share, 2)} of the truths in the outer 10% of their posterior (0.10 "
+            f"if honest), pooled rank p = {fmt_sig(p)}: "
+            + ("<span class='ok'>consistent with a calibrated posterior</span>" if ok else
+               "<span class='warn'>the posterior is not calibrated</span>") + ".")
+
+
+def _lines_table(cal: dict) -> str:
+    lines = cal.get("lines")
+    if not lines:
+        return ""
+    fq = np.asarray(lines["frequency_q"], float) / (2 * np.pi)
+    aq = np.asarray(lines["amplitude_q"], float) * 1e3
+    rows = []
+    for k in range(fq.shape[1]):
+        for j in range(fq.shape[2]):
+            f_ci, a_ci = [fq[0, k, j], fq[2, k, j]], [aq[0, k, j], aq[2, k, j]]
+            fd = min(decimals(f_ci, 0, -3, 2), 0) if f_ci[1] > f_ci[0] else 0
+            ad = decimals(a_ci, 2, 1, 4)
+            f = lambda v: f"{round(v, fd):,.0f}" if fd <= 0 else f"{v:,.{fd}f}"  # noqa: E731
+            rows.append([td(str(k)), td(str(j + 1)),
+                         td(f"{f(fq[1, k, j])} <span class='ci'>[{f(f_ci[0])}, {f(f_ci[1])}]</span>"),
+                         td(f"{fmt(aq[1, k, j], ad)} <span class='ci'>[{fmt(a_ci[0], ad)}, {fmt(a_ci[1], ad)}]"
+                            "</span>")])
+    return table(["engine", "line (by frequency)", "frequency (Hz): median [5%, 95%]",
+                  "amplitude (mm): median [5%, 95%]"], rows)
+
+
+def _acquisition_compare(cls: str, cal: dict, w: Html) -> str:
+    st, me = cal.get("acquisition") or {}, cal.get("measured_acquisition") or {}
+    far = {f["key"] for f in nuisances({cls: cal})}
+    bits = []
+    for key, label, unit, d in (("carrier", "carrier return", " x sum(Gamma)", 2),
+                                ("noise_db", "noise floor", " dB", 0)):
+        if st.get(key) and me.get(key) and st[key] != me[key]:
+            text = (f"{label} measured {me[key][0]:.{d}f} to {me[key][1]:.{d}f}{unit} "
+                    f"(the campaign states {st[key][0]:.{d}f} to {st[key][1]:.{d}f}{unit})")
+            if key in far:
+                text = w.warn(text + f": far outside the stated range (by more than {FAR:g} of its width)")
+            bits.append(text)
+    if not bits:
+        return ""
+    return "<p class='note'>What the calibration measured of the acquisition: " + "; ".join(bits) + ".</p>"
+
+
+def calibration_section(r: dict, figs: Figures, w: Html, report_dir: Path) -> str:
+    out = ["<p class='note'>Each class is calibrated on its few measurements under the campaign's acquisition "
+           "(phases marginalised). A vibration model is a sum of four lines per engine; which line is the roll, "
+           "the pitch or a mixing term is a labelling one profile cannot fix, so the posterior is shown label-free: "
+           "every line's frequency and amplitude, lines sorted by frequency.</p>"]
+    for cls, c in r["calibration"].items():
+        d = c["diagnostics"]
+        k = f"calibration.{cls}.diagnostics"
+        status = ("<span class='ok'>converged</span>" if c["converged"] else "<span class='warn'>NOT CONVERGED</span>")
+        reason = w.esc(d.get("reason", ""))
+        for prefix in ("NOT CONVERGED: ", "converged: ", "Converged: "):
+            reason = reason[len(prefix):] if reason.startswith(prefix) else reason
+        sampler = d.get("sampler", "emcee")
+        if sampler == "smc":
+            chain = f"SMC, {fmt(d.get('smc_n_particles'))} particles, {fmt(d.get('smc_stages'))} stages"
+        else:
+            chain = (f"{fmt(d.get('n_walkers'))} walkers x {fmt(d.get('chain_steps'))} steps (chain = "
+                     f"{w.num(k + '.steps_over_tau', d.get('steps_over_tau'), 1)} x max tau)")
+        out.append(f"<h3>{w.esc(cls)}: {status}</h3>")
+        reason = reason[:1].upper() + reason[1:]
+        out.append(f"<ul><li><b>Convergence</b>: {reason}.</li>"
+                   f"<li><b>Sampler</b>: {chain}; min ESS {w.num(k + '.ess_min', d.get('ess_min'), 0)}; acceptance "
+                   f"{w.num(k + '.acceptance_mean', d.get('acceptance_mean'), 2)}; "
+                   f"{w.num(k + '.seconds', d.get('seconds'), 0)} s on {fmt(c.get('n_profiles'))} measurements.</li>"
+                   f"<li><b>SBC</b>: {_sbc_text(c, w)}</li></ul>")
+        if c.get("lines"):
+            out.append(figs.embed(f"posterior_{cls}", figures.posterior_lines_figure(c, cls),
+                                  f"{cls} posterior, label-free: each engine's four vibration lines, frequency in Hz "
+                                  f"against amplitude in mm, medians with 5-95% intervals, and the class reference's "
+                                  "line frequencies"))
+        out.append(_acquisition_compare(cls, c, w))
+        unid = [p for p, ok in (d.get("identified") or {}).items() if not ok]
+        body = _lines_table(c)
+        if unid:
+            body += (f"<p class='note'>Parameters that stay near their prior (posterior sd over "
+                     f"{fmt(d.get('identified_ratio', 0.5), 1)} x prior sd): {w.esc(', '.join(unid))}.</p>")
+        corner = c.get("corner")
+        if corner and Path(corner).is_file():
+            rel = os.path.relpath(corner, report_dir)
+            body += (f"<p>Full corner plot (every sampled parameter, per engine, in physical units): "
+                     f"<a href='{html.escape(rel)}'>{html.escape(rel)}</a> (opens at full size).</p>"
+                     + img(corner, f"{cls} corner plot of the sampled parameters"))
+        trace = c.get("trace")
+        if trace and Path(trace).is_file():
+            body += ("<p>The walkers' paths (burn-in shaded):</p>"
+                     + img(trace, f"{cls} trace plot of the walkers' paths"))
+        out.append(details(f"{cls}: the lines in numbers, the corner and trace plots", body))
+    return "\n".join(out)
+
+
