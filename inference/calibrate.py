@@ -24,7 +24,7 @@ import numpy as np
 
 from ..generator import IDX, N_PARAMS, ClassParams, load_reference
 from ..generator.acquisition import Acquisition
-from ..generator.line_moments import carrier_line_factor
+from ..generator.magnitude import carrier_line_factor
 from ..radar import RadarConfig, atomic_write
 from ..radar.seeds import seed_sequence
 from .ensemble import fingerprint

@@ -40,7 +40,8 @@ from scipy.special import logsumexp
 
 from ..generator import IDX, N_PARAMS, vibration_terms
 from ..generator.acquisition import Acquisition, noise_sigma
-from ..generator.line_moments import SUM_NAMES, line_sums, magnitude_moments
+from ..generator.line_moments import SUM_NAMES, line_sums
+from ..generator.magnitude import magnitude_moments
 from ..radar import RadarConfig
 from .base import MarginalLikelihood
 from .layout import Layout

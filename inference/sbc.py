@@ -108,8 +108,6 @@ def run_sbc(reference: ClassParams | str = "HELI", n_replicates: int = 100, *, r
     from concurrent.futures import ProcessPoolExecutor
     from pathlib import Path
 
-    from scipy import stats
-
     ref = load_reference(reference) if isinstance(reference, str) else reference
     settings = settings or CalibrationSettings()
     key = json.dumps([ref.name, n_replicates, ramps, n_measurements, settings.to_dict(), str(seed), n_rank],
@@ -139,7 +137,18 @@ def run_sbc(reference: ClassParams | str = "HELI", n_replicates: int = 100, *, r
     else:
         for i, ss in todo:
             record(sbc_replicate(ref, i, ss, *args))
-    recs = [done[i] for i in sorted(done)]
+    out = summarise([done[i] for i in sorted(done)], n_rank, n_bins)
+    out.update(settings=settings.to_dict(), ramps=ramps, n_measurements=n_measurements)
+    return out
+
+
+def summarise(recs: list[dict], n_rank: int, n_bins: int = 5) -> dict:
+    """Rank statistics of finished replicates (:func:`sbc_replicate` records, e.g. read
+    back from a checkpoint): per-quantity chi-square p-values and outer-10% shares, the
+    pooled p-value and outer share, converged share, seconds."""
+    from scipy import stats
+
+    n_replicates = len(recs)
     names = recs[0]["names"]
     ranks = np.array([r["ranks"] for r in recs])
     converged = [r["converged"] for r in recs]
@@ -155,5 +164,4 @@ def run_sbc(reference: ClassParams | str = "HELI", n_replicates: int = 100, *, r
     return {"ranks": ranks, "names": names, "p_values": dict(zip(names, map(float, pvals))),
             "pooled_p": float(pooled), "min_p": float(pvals.min()), "outer_share": float(outer.mean()),
             "outer_share_by_quantity": dict(zip(names, map(float, outer.mean(axis=0)))), "n_rank": n_rank,
-            "converged_share": float(np.mean(converged)), "seconds": seconds, "settings": settings.to_dict(),
-            "ramps": ramps, "n_measurements": n_measurements, "n_replicates": n_replicates}
+            "converged_share": float(np.mean(converged)), "seconds": seconds, "n_replicates": n_replicates}

@@ -7,7 +7,8 @@ from scipy.special import jv
 
 from mdaug.generator import Acquisition, load_reference, render, vibration_terms
 from mdaug.generator.acquisition import draw_acquisitions, render_spectra
-from mdaug.generator.line_moments import line_sums, line_vectors, magnitude_moments
+from mdaug.generator.line_moments import line_sums, line_vectors
+from mdaug.generator.magnitude import magnitude_moments
 from mdaug.generator.model import spectra
 from mdaug.inference.closed_form import ClosedFormLikelihood
 from mdaug.inference.layout import DEFAULT_STEADY, Layout
@@ -159,8 +160,9 @@ def test_zscores_at_the_truth_have_unit_spread():
         return 1e12 if not np.isfinite(ll) else -ll
 
     v = th[cols]
-    for method in ("Powell", "Nelder-Mead"):
-        v = minimize(nll, v, method=method, options=dict(maxiter=4000, xatol=1e-4, fatol=1e-6)).x
+    for method, opts in (("Powell", dict(maxiter=4000, xtol=1e-4, ftol=1e-6)),
+                         ("Nelder-Mead", dict(maxiter=4000, xatol=1e-4, fatol=1e-6))):
+        v = minimize(nll, v, method=method, options=opts).x
     t = th.copy()
     t[cols] = v
     z = lik.zscores(t[None])[0]
