@@ -138,18 +138,6 @@ def _bessel_poly_py(beta, nmax, degree):  # pragma: no cover - compiled below
     return out
 
 
-def _fejer2_py(x, k):  # pragma: no cover - compiled below
-    """|F_K(x)|^2 = (sin(K x / 2) / (K sin(x / 2)))^2, 1 at x = 0 mod 2 pi."""
-    if k == 1:
-        return 1.0
-    h = 0.5 * x
-    sh = math.sin(h)
-    if abs(sh) < 1e-9:
-        return 1.0
-    v = math.sin(k * h) / (k * sh)
-    return v * v
-
-
 def _line_sums_py(gam, amp, freq, beta_scale, carrier_bin, centres, offsets, table, vectors, neg, codes_pow,
                   code_base, line_of_code, ftab, ramps, ramp_rad, g1, amp_tol, pair_tol, hz_per_bin,
                   coherent, reach_tol):  # pragma: no cover
@@ -478,7 +466,6 @@ def _table_at_py(table, jf, r, n_samples):  # pragma: no cover - compiled below
 
 if numba is not None:
     _bessel_poly = numba.njit(cache=True)(_bessel_poly_py)
-    _fejer2 = numba.njit(cache=True)(_fejer2_py)
     _fejer_at = numba.njit(cache=True)(_fejer_at_py)
     _table_at = numba.njit(cache=True)(_table_at_py)
     _line_sums = numba.njit(cache=True)(_line_sums_py)
