@@ -56,6 +56,15 @@ class LogPosteriorBase:
             out[ok] = -self.log_likelihood(v[ok])
         return out
 
+    def fit_start(self, x: np.ndarray) -> np.ndarray:
+        """The fit-space point of class vector x (13E,) (each measurement's own terms in
+        the middle of their prior)."""
+        lay = self.layout
+        start = lay.z_from_physics(x)
+        if lay.marginal:
+            start = lay.theta_from_z(start[None], np.full((1, lay.M), np.mean(lay.tail_bounds)))[0]
+        return self.canonical_fit(start[None])[0]
+
     def coarse(self) -> "LogPosteriorBase":
         """A cheaper copy for the fit's global stage (the same object when there is none)."""
         return self
@@ -75,6 +84,11 @@ class MarginalLikelihood(LogPosteriorBase):
     def canonical_fit(self, v: np.ndarray) -> np.ndarray:
         v = np.atleast_2d(v)
         return np.concatenate([self.layout.canonical(v[:, : self.layout.dim_z]), v[:, self.layout.dim_z:]], axis=1)
+
+    def fit_objective(self, v: np.ndarray) -> np.ndarray:
+        """The objective at the mirror image that meets the ordering constraints (the same
+        profiles), so a global search over the whole box is not a plateau of +inf."""
+        return super().fit_objective(self.canonical_fit(v))
 
     def nuisance_cols(self) -> np.ndarray:
         """Fit-space columns of the measurements' own terms (the tail and their z block)."""

@@ -157,10 +157,7 @@ def run_calibration(post, ref: ClassParams, settings: CalibrationSettings, ss: n
         fit = saved_fit(backend_path, fp)
         fit_reused = fit is not None
         if fit is None:
-            start = layout.z_from_physics(start_x)
-            if layout.marginal:
-                start = layout.theta_from_z(start[None], np.full((1, layout.M), np.mean(layout.tail_bounds)))[0]
-            fit = global_fit(post, settings, fit_ss, start=post.canonical_fit(start[None])[0])
+            fit = global_fit(post, settings, fit_ss, start=post.fit_start(start_x))
             path = _fit_path(backend_path)
             if path is not None:
                 text = json.dumps({"fingerprint": fp, "fit": fit.to_dict()})

@@ -92,6 +92,9 @@ class ClosedFormLikelihood(MarginalLikelihood):
         alpha = 2 * np.pi * np.arange(self.n_alpha) / self.n_alpha
         self._rot = np.exp(1j * alpha)  # (Q,)
         self.n_calls = 0
+        # the fit searches role space (a box where every point is a valid drone) and the
+        # sampler line space; with a role-space layout both are the same
+        self._role = layout.role_layout() if not layout.labelled else None
 
     @property
     def n_bins(self) -> int:
@@ -170,3 +173,40 @@ class ClosedFormLikelihood(MarginalLikelihood):
         mu = mean[..., self._keep] / mc[..., None]
         total = var[..., self._keep] / (mc * mc)[..., None] + self.floor ** 2 + mu * mu * (vc / (mc * mc))[..., None]
         return (self.y[None] - mu) / np.sqrt(total)
+
+    # ---- the fit space: role space (a box that the fit can search) ---------------------------
+    def _lines(self, v: np.ndarray) -> np.ndarray:
+        v = np.atleast_2d(v)
+        z = self.layout.from_roles(v[:, : self.layout.dim_z], self._role)
+        return np.concatenate([z, v[:, self.layout.dim_z:]], axis=1)
+
+    def fit_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return (self._role or self.layout).theta_bounds()
+
+    def canonical_fit(self, v: np.ndarray) -> np.ndarray:
+        if self._role is None:
+            return super().canonical_fit(v)
+        v = np.atleast_2d(v)
+        return np.concatenate([self._role.canonical(v[:, : self.layout.dim_z]), v[:, self.layout.dim_z:]], axis=1)
+
+    def fit_objective(self, v: np.ndarray) -> np.ndarray:
+        """Negative log-likelihood at role-space points (their mirror image meeting the
+        role ordering), +inf outside the line-space prior."""
+        if self._role is None:
+            return super().fit_objective(v)
+        th = self._lines(self.canonical_fit(v))
+        ok = np.isfinite(self.log_prior(th, any_tail=True))
+        out = np.full(len(th), np.inf)
+        if ok.any():
+            out[ok] = -self.log_likelihood(th[ok])
+        return out
+
+    def theta_from_fit(self, v: np.ndarray) -> np.ndarray:
+        return self._lines(v) if self._role is not None else super().theta_from_fit(v)
+
+    def fit_start(self, x: np.ndarray) -> np.ndarray:
+        if self._role is None:
+            return super().fit_start(x)
+        start = self._role.z_from_physics(x)
+        start = self._role.theta_from_z(start[None], np.full((1, self.layout.M), np.mean(self.layout.tail_bounds)))
+        return self.canonical_fit(start)[0]

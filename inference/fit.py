@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..radar.progress import progress_bar
+
 from .likelihood import LogPosterior
 
 AGREE_MISFIT = 2.0  # nats: starts within this of the best fit "reach the same height"
@@ -68,13 +70,16 @@ class FitResult:
                    algorithm=d["algorithm"], seconds=float(d["seconds"]), notes=list(d.get("notes", [])), **arr)
 
 
-def _run_one(nlopt, algorithm: str, post, lo, hi, u0, budget: int, seed: int):
-    """One nlopt run on the unit cube; returns (best u, best value, evaluations)."""
+def _run_one(nlopt, algorithm: str, post, lo, hi, u0, budget: int, seed: int, bar=None):
+    """One nlopt run on the unit cube; returns (best u, best value, evaluations). ``bar``:
+    a progress bar told of every evaluation."""
     d = len(lo)
     best = {"f": np.inf, "u": np.array(u0, float), "n": 0}
 
     def objective(u, grad):
         best["n"] += 1
+        if bar is not None:
+            bar.update(1)
         f = float(post.fit_objective((lo + (hi - lo) * np.asarray(u))[None])[0])
         if not np.isfinite(f):
             f = 1e300
@@ -157,6 +162,9 @@ def global_fit(post, settings, seed_seq: np.random.SeedSequence, start=None) -> 
     coarse = post.coarse()
     rng = np.random.default_rng(seed_seq)
     zs, fs, ns = [], [], []
+    polish = settings.polish_budget if settings.local_algorithm != "none" else 0
+    bar = progress_bar(total=settings.n_starts * (settings.fit_budget + polish) + polish, desc="fit",
+                       unit="eval", progress=settings.progress)  # an upper bound: nlopt may stop early
     for s in range(settings.n_starts):
         if s == 0 and start is not None:
             v0 = np.clip(start, lo, hi)
@@ -169,7 +177,7 @@ def global_fit(post, settings, seed_seq: np.random.SeedSequence, start=None) -> 
         else:
             u0 = rng.uniform(size=len(lo))
         seed = int(rng.integers(2**31 - 1))
-        u, f, n = _run_one(nlopt, settings.fit_algorithm, coarse, lo, hi, u0, settings.fit_budget, seed)
+        u, f, n = _run_one(nlopt, settings.fit_algorithm, coarse, lo, hi, u0, settings.fit_budget, seed, bar)
         if coarse is not post:
             f = float(post.fit_objective((lo + width * u)[None])[0])
         if settings.local_algorithm != "none" and settings.polish_budget > 0:
@@ -177,13 +185,15 @@ def global_fit(post, settings, seed_seq: np.random.SeedSequence, start=None) -> 
             # (the reference) directly, which a population method may have left behind
             for u_from in ([u, u0] if s == 0 and start is not None else [u]):
                 u2, f2, n2 = _run_one(nlopt, settings.local_algorithm, post, lo, hi, u_from,
-                                      settings.polish_budget, seed)
+                                      settings.polish_budget, seed, bar)
                 n += n2
                 if f2 < f:
                     u, f = u2, f2
         zs.append(post.canonical_fit((lo + width * u)[None])[0])
         fs.append(f)
         ns.append(n)
+        bar.set_postfix_str(f"start {s + 1} of {settings.n_starts}, best misfit {min(fs):.1f}", refresh=True)
+    bar.close()
     zs, fs = np.array(zs), np.array(fs)
     best = int(np.argmin(fs))
     shared = slice(0, layout.n_shared)

@@ -129,6 +129,32 @@ class LineLayout(Layout):
             if k:
                 z[self.shared_col(k, "lnG")] = np.log(max(g[k] / g[0], 1e-300)) if g[0] > 0 else 0.0
 
+    def role_layout(self) -> Layout:
+        """The role-space layout of the same problem (its z has the same columns per
+        measurement; the shared block holds roles instead of sorted lines)."""
+        return Layout(self.E, self.M, self.priors, marginal=True, noise_db_bounds=self.tail_bounds,
+                      carrier_bounds=self.carrier_bounds, carrier_name=self.carrier_name)
+
+    def from_roles(self, z_role: np.ndarray, role: Layout) -> np.ndarray:
+        """Role-space z (W, dim_z) -> line-space z (W, dim_z), vectorised."""
+        z_role = np.atleast_2d(z_role)
+        x = role.shared_physics(z_role).reshape(len(z_role), self.E, N_PARAMS)
+        w, a, _ = engine_lines(x)
+        order = np.argsort(w, axis=-1)
+        w, a = np.take_along_axis(w, order, -1), np.take_along_axis(a, order, -1)
+        eng = np.argsort(w[..., 0], axis=-1, kind="stable")
+        w = np.take_along_axis(w, eng[..., None], 1)
+        a = np.take_along_axis(a, eng[..., None], 1)
+        g = np.take_along_axis(x[..., IDX["Gamma"]], eng, 1)
+        out = z_role.copy()
+        for k in range(self.E):
+            for j in range(4):
+                out[:, self.shared_col(k, f"A{j + 1}")] = a[:, k, j]
+                out[:, self.shared_col(k, f"w{j + 1}")] = w[:, k, j]
+            if k:
+                out[:, self.shared_col(k, "lnG")] = np.log(g[:, k] / g[:, 0])
+        return out
+
     def canonical(self, z: np.ndarray) -> np.ndarray:
         """Lines sorted within each engine, engines by their lowest line (Gamma ratios to
         the new engine 0)."""
@@ -170,8 +196,7 @@ class LineLayout(Layout):
 
     def sample_prior(self, n: int, rng: np.random.Generator, sigma_bounds=None) -> np.ndarray:
         """n prior draws: role-space draws (:class:`Layout`) with their lines sorted."""
-        role = Layout(self.E, self.M, self.priors, marginal=True, noise_db_bounds=self.tail_bounds,
-                      carrier_bounds=self.carrier_bounds, carrier_name=self.carrier_name)
+        role = self.role_layout()
         out = np.empty((0, self.dim))
         while len(out) < n:  # re-referenced to the lowest engine, a Gamma ratio can leave its box
             th = role.sample_prior(n, rng)
