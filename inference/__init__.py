@@ -5,13 +5,15 @@ corner and trace plots, engine-count selection, posterior augmentation.
 Imports :mod:`mdaug.generator` and :mod:`mdaug.radar` only.
 """
 from .calibrate import calibrate
+from .closed_form import ClosedFormLikelihood
 from .likelihood import LogPosterior, prepare_measured
 from .posterior_augment import FitSigmaPAugmenter, PosteriorAugmenter, PosteriorSource
 from .layout import Layout
+from .line_layout import LineLayout
 from .priors import Priors
 from .result import CalibrationResult
 from .settings import CalibrationSettings
 from .synthetic import SyntheticLikelihood
 
-__all__ = ["CalibrationResult", "CalibrationSettings", "Layout", "LogPosterior", "PosteriorAugmenter", "PosteriorSource", "FitSigmaPAugmenter", "SyntheticLikelihood", "Priors",
+__all__ = ["CalibrationResult", "CalibrationSettings", "ClosedFormLikelihood", "Layout", "LineLayout", "LogPosterior", "PosteriorAugmenter", "PosteriorSource", "FitSigmaPAugmenter", "SyntheticLikelihood", "Priors",
            "calibrate", "prepare_measured"]
