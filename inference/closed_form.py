@@ -43,7 +43,7 @@ from ..generator.acquisition import Acquisition, noise_sigma
 from ..generator.line_moments import SUM_NAMES, line_sums
 from ..generator.magnitude import magnitude_moments
 from ..radar import RadarConfig
-from .base import MarginalLikelihood
+from .base import LogPosteriorBase, MarginalLikelihood
 from .layout import Layout
 
 LOG_2PI = float(np.log(2 * np.pi))
@@ -194,12 +194,7 @@ class ClosedFormLikelihood(MarginalLikelihood):
         role ordering), +inf outside the line-space prior."""
         if self._role is None:
             return super().fit_objective(v)
-        th = self._lines(self.canonical_fit(v))
-        ok = np.isfinite(self.log_prior(th, any_tail=True))
-        out = np.full(len(th), np.inf)
-        if ok.any():
-            out[ok] = -self.log_likelihood(th[ok])
-        return out
+        return LogPosteriorBase.fit_objective(self, self._lines(self.canonical_fit(v)))
 
     def theta_from_fit(self, v: np.ndarray) -> np.ndarray:
         return self._lines(v) if self._role is not None else super().theta_from_fit(v)

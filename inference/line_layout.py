@@ -118,16 +118,18 @@ class LineLayout(Layout):
         """The shared block from vectors x (E, 13): lines sorted within engines, engines by
         their lowest line, Gamma ratios to the new engine 0."""
         w, a, _ = engine_lines(x)  # (E, 4)
-        order = np.argsort(w, axis=-1)
-        w, a = np.take_along_axis(w, order, -1), np.take_along_axis(a, order, -1)
-        eng = np.argsort(w[:, 0], kind="stable")
-        w, a, g = w[eng], a[eng], x[eng, IDX["Gamma"]]
+        self._write_lines(z[None], *_sorted_lines(a[None], w[None], x[None, :, IDX["Gamma"]]))
+
+    def _write_lines(self, z: np.ndarray, amp: np.ndarray, freq: np.ndarray, gam: np.ndarray) -> None:
+        """Write sorted lines (W, E, 4) and Gamma (W, E) into the shared block of z (W, dim_z)."""
         for k in range(self.E):
             for j in range(4):
-                z[self.shared_col(k, f"A{j + 1}")] = a[k, j]
-                z[self.shared_col(k, f"w{j + 1}")] = w[k, j]
+                z[:, self.shared_col(k, f"A{j + 1}")] = amp[:, k, j]
+                z[:, self.shared_col(k, f"w{j + 1}")] = freq[:, k, j]
             if k:
-                z[self.shared_col(k, "lnG")] = np.log(max(g[k] / g[0], 1e-300)) if g[0] > 0 else 0.0
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    ratio = np.log(np.maximum(gam[:, k], 1e-300) / gam[:, 0])
+                z[:, self.shared_col(k, "lnG")] = np.where(gam[:, 0] > 0, ratio, 0.0)
 
     def role_layout(self) -> Layout:
         """The role-space layout of the same problem (its z has the same columns per
@@ -140,39 +142,16 @@ class LineLayout(Layout):
         z_role = np.atleast_2d(z_role)
         x = role.shared_physics(z_role).reshape(len(z_role), self.E, N_PARAMS)
         w, a, _ = engine_lines(x)
-        order = np.argsort(w, axis=-1)
-        w, a = np.take_along_axis(w, order, -1), np.take_along_axis(a, order, -1)
-        eng = np.argsort(w[..., 0], axis=-1, kind="stable")
-        w = np.take_along_axis(w, eng[..., None], 1)
-        a = np.take_along_axis(a, eng[..., None], 1)
-        g = np.take_along_axis(x[..., IDX["Gamma"]], eng, 1)
         out = z_role.copy()
-        for k in range(self.E):
-            for j in range(4):
-                out[:, self.shared_col(k, f"A{j + 1}")] = a[:, k, j]
-                out[:, self.shared_col(k, f"w{j + 1}")] = w[:, k, j]
-            if k:
-                out[:, self.shared_col(k, "lnG")] = np.log(g[:, k] / g[:, 0])
+        self._write_lines(out, *_sorted_lines(a, w, x[..., IDX["Gamma"]]))
         return out
 
     def canonical(self, z: np.ndarray) -> np.ndarray:
         """Lines sorted within each engine, engines by their lowest line (Gamma ratios to
         the new engine 0)."""
         z = np.array(np.atleast_2d(z), dtype=float)
-        amp, freq, gam = self.lines(z)
-        order = np.argsort(freq, axis=-1)
-        amp, freq = np.take_along_axis(amp, order, -1), np.take_along_axis(freq, order, -1)
-        eng = np.argsort(freq[..., 0], axis=-1, kind="stable")
-        amp = np.take_along_axis(amp, eng[..., None], 1)
-        freq = np.take_along_axis(freq, eng[..., None], 1)
-        gam = np.take_along_axis(gam, eng, 1)
         out = z.copy()
-        for k in range(self.E):
-            for j in range(4):
-                out[:, self.shared_col(k, f"A{j + 1}")] = amp[:, k, j]
-                out[:, self.shared_col(k, f"w{j + 1}")] = freq[:, k, j]
-            if k:
-                out[:, self.shared_col(k, "lnG")] = np.log(gam[:, k] / gam[:, 0])
+        self._write_lines(out, *_sorted_lines(*self.lines(z)))
         return out
 
     # ---- prior -------------------------------------------------------------------------------
@@ -212,3 +191,13 @@ class LineLayout(Layout):
         """No labellings to move between: the identity."""
         theta = np.atleast_2d(theta)
         return theta.copy(), np.zeros(len(theta))
+
+
+def _sorted_lines(amp: np.ndarray, freq: np.ndarray, gam: np.ndarray):
+    """Lines (W, E, 4) sorted by frequency within each engine, engines by their lowest line;
+    Gamma (W, E) follows its engine."""
+    order = np.argsort(freq, axis=-1)
+    amp, freq = np.take_along_axis(amp, order, -1), np.take_along_axis(freq, order, -1)
+    eng = np.argsort(freq[..., 0], axis=-1, kind="stable")
+    return (np.take_along_axis(amp, eng[..., None], 1), np.take_along_axis(freq, eng[..., None], 1),
+            np.take_along_axis(gam, eng, 1))
