@@ -97,7 +97,8 @@ def run_calibrate(args) -> int:
 
     backend = _backend(args)
     check_paths(inputs=[("MEASURED", args.measured)],
-                outputs=[Output("--out", args.out, "posterior"), Output("--corner", args.corner, "plot"),
+                outputs=[Output("--out", args.out, "npz" if args.population else "posterior"),
+                         Output("--corner", args.corner, "plot"),
                          Output("--trace", args.trace, "plot"),
                          Output("--backend", backend, "checkpoint", beside=_checkpoint_files(args)[1:])])
     radar = RadarConfig()
@@ -105,6 +106,12 @@ def run_calibrate(args) -> int:
     cls = args.class_name.upper() if args.class_name.upper() in data.classes else args.class_name
     profiles = data.select(cls)  # names the file when the class is absent
     data.check_no_zero_rows(cls)
+    drones = data.specimens(cls)
+    if args.specimen is not None:
+        if args.specimen not in set(drones.tolist()):
+            raise DataFileError(f"{args.measured}: field 'specimen' holds no drone {args.specimen!r} of class {cls} "
+                                f"(drones present: {sorted(set(drones.tolist()))})")
+        profiles, drones = profiles[drones == args.specimen], drones[drones == args.specimen]
     if profiles.shape[1] != radar.slice_length:
         raise DataFileError(f"{args.measured}: field 'profiles' has {profiles.shape[1]}-bin profiles; calibration "
                             f"takes {radar.slice_length}-bin peak-centred signatures (run 'mdaug process' on "
@@ -138,6 +145,12 @@ def run_calibrate(args) -> int:
     if len(profiles) == 1:
         warn("calibrate", "one profile only: the posterior is weakly identified (the supported case is a handful "
                           "of measurements, typically 5)")
+    if args.population:
+        return run_population(args, profiles, drones, settings, acquisition)
+    if len(set(drones.tolist())) > 1:
+        warn("calibrate", f"{args.measured} holds {len(set(drones.tolist()))} drones of {cls} (field 'specimen'); "
+                          "they are calibrated as one drone: --population calibrates each and the class's "
+                          "population, --specimen ID one of them")
     if args.engines == "auto":
         from ..inference.compare import select_engines
 
@@ -163,6 +176,62 @@ def run_calibrate(args) -> int:
     if not res.converged:
         warn("calibrate", f"the chain did not converge ({res.diagnostics['reason']}); {args.out} is flagged "
                           "not converged")
+        return 0 if args.allow_unconverged else EXIT_NOT_CONVERGED
+    return 0
+
+
+def drone_path(out: Path, drone: str) -> Path:
+    """Where ``--population`` keeps a drone's posterior (a rerun reuses it)."""
+    return Path(f"{out}.drone-{drone}.nc")
+
+
+def run_population(args, profiles, drones, settings, acquisition) -> int:
+    """Each drone calibrated on its own (kept beside OUT, reused by a rerun on the same
+    data), then the class's population (:func:`mdaug.inference.calibrate_population`)."""
+    import numpy as np
+
+    from ..inference.calibrate import calibrate
+    from ..inference.likelihood import prepare_measured
+    from ..inference.population_result import calibrate_population
+    from ..inference.result import CalibrationResult
+    from ..radar import RadarConfig
+    from ..radar.seeds import child_seed
+
+    if args.engines == "auto":
+        raise ValueError("--population calibrates every drone with one engine count: give --engines N, not auto")
+    ids = list(dict.fromkeys(drones.tolist()))
+    cls = args.class_name.upper()
+    if len(ids) < 2:
+        warn("calibrate", f"one drone of {cls} only: the population's spreads are the stated prior (assumed, "
+                          "not measured)")
+    results = []
+    for k, drone in enumerate(ids):
+        path, rows = drone_path(args.out, drone), profiles[drones == drone]
+        res = None
+        if path.is_file():
+            old = CalibrationResult.load(path, class_name=cls)
+            data, _ = prepare_measured(rows, RadarConfig(), settings.normalisation)
+            if np.array_equal(np.asarray(old.idata.observed_data["y"]), data):
+                res = old
+                result(f"drone {drone}: reused {path}")
+        if res is None:
+            info(f"drone {drone} ({k + 1} of {len(ids)}): calibrating from {len(rows)} profile(s)")
+            res = calibrate(rows, cls, engines=args.engines, settings=settings, acquisition=acquisition,
+                            random_state=child_seed(args.seed, "drone", drone),
+                            backend_path=Path(f"{path}.chain.h5"))
+            res.save(path)
+            Path(f"{path}.chain.h5").unlink(missing_ok=True)
+            Path(f"{path}.chain.h5.fit.json").unlink(missing_ok=True)
+        result(f"drone {drone}: {'converged' if res.converged else 'NOT converged'} ({res.diagnostics['reason']})")
+        results.append(res)
+    pop = calibrate_population(results, ids, random_state=child_seed(args.seed, "population"))
+    pop.save(args.out)
+    result(pop.report())
+    result(f"wrote {args.out} (and each drone's posterior beside it: {drone_path(args.out, '<id>')})")
+    done = pop.converged and all(r.converged for r in results)
+    if not done:
+        warn("calibrate", f"not converged: {sum(not r.converged for r in results)} drone(s), hyper-posterior "
+                          f"{'converged' if pop.converged else 'not converged'}; {args.out} is flagged")
         return 0 if args.allow_unconverged else EXIT_NOT_CONVERGED
     return 0
 
@@ -197,6 +266,12 @@ def add_calibrate(sub, parents, help):
                    help="engines to fit: a count, or auto (chosen by LOO among 1, 2, 4) (default: the "
                         "reference's count)")
     p.add_argument("--seed", type=seed_int, default=0, help="random seed of fit and sampler (default: %(default)s)")
+    p.add_argument("--specimen", default=None, metavar="ID",
+                   help="calibrate only the profiles of this drone (the file's field 'specimen') (default: all)")
+    p.add_argument("--population", action="store_true",
+                   help="calibrate each drone of the class (field 'specimen') on its own, then the class's "
+                        "population (spreads across drones); OUT is then a population NPZ, each drone's "
+                        "posterior is kept beside it as OUT.drone-ID.nc")
     p.add_argument("--corner", type=Path, default=None, help="also write a corner plot PNG (default: none)")
     p.add_argument("--trace", type=Path, default=None, help="also write a trace plot PNG (default: none)")
     p.add_argument("--backend", type=Path, default=None,

@@ -207,26 +207,33 @@ def _check_backend(path: Path, fp: str, shape) -> int:
         raise ValueError(f"{path}: not a readable HDF5 file ({exc})") from exc
 
 
-def start_walkers(post, fit, settings, n_walkers: int, rng) -> tuple[np.ndarray, int]:
-    """Initial walkers (n_walkers, dim): around the best fit, and with ``init_modes``
-    also around every distinct rival mode the fit found (within RIVAL_MISFIT nats),
-    split evenly, so the ensemble starts on every competitive mode it knows of.
-    Returns (walkers, number of modes started on)."""
+def fit_modes(post, fit) -> list[np.ndarray]:
+    """The fit-space centres of the distinct modes the fit found: the best, then every
+    start within RIVAL_MISFIT nats of it and more than AGREE_DISTANCE prior widths
+    from each centre already taken (in the shared parameters)."""
     from .fit import AGREE_DISTANCE, RIVAL_MISFIT
 
     layout = post.layout
     lo, hi = layout.z_bounds()
     width = (hi - lo)[: layout.n_shared]
-    order = np.argsort(fit.starts_misfit)
-    centres = [fit.best_z]
-    if settings.init_modes:
-        for i in order:
-            z = fit.starts_z[i]
-            if fit.starts_misfit[i] - fit.misfit > RIVAL_MISFIT:
-                break
-            if all(np.max(np.abs(z[: layout.n_shared] - c[: layout.n_shared]) / width) > AGREE_DISTANCE
-                   for c in centres):
-                centres.append(z)
+    centres = [np.asarray(fit.best_z)]
+    for i in np.argsort(fit.starts_misfit):
+        z = fit.starts_z[i]
+        if fit.starts_misfit[i] - fit.misfit > RIVAL_MISFIT:
+            break
+        if all(np.max(np.abs(z[: layout.n_shared] - c[: layout.n_shared]) / width) > AGREE_DISTANCE
+               for c in centres):
+            centres.append(np.asarray(z))
+    return centres
+
+
+def start_walkers(post, fit, settings, n_walkers: int, rng) -> tuple[np.ndarray, int]:
+    """Initial walkers (n_walkers, dim): around the best fit, and with ``init_modes``
+    also around every distinct rival mode the fit found (:func:`fit_modes`), split
+    evenly, so the ensemble starts on every competitive mode it knows of.
+    Returns (walkers, number of modes started on)."""
+    layout = post.layout
+    centres = fit_modes(post, fit) if settings.init_modes else [fit.best_z]
     counts = np.full(len(centres), n_walkers // len(centres))
     counts[0] += n_walkers - counts.sum()
     groups = []

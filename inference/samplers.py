@@ -92,10 +92,14 @@ def get_sampler(name: str) -> Sampler:
         from .tempering import SMCSampler
 
         return SMCSampler()
+    if name == "laplace":
+        from .laplace import LaplaceSampler
+
+        return LaplaceSampler()
     raise ValueError(f"unknown sampler {name!r}; expected one of {SAMPLERS}")
 
 
-SAMPLERS = ("emcee", "smc")
+SAMPLERS = ("emcee", "smc", "laplace")
 
 
 @contextlib.contextmanager

@@ -104,14 +104,28 @@ def run_sbc(reference: ClassParams | str = "HELI", n_replicates: int = 100, *, r
     rerun with the same arguments skips the replicates it holds (resume). workers:
     replicates run in that many processes (each replicate has its own seed, so the
     result does not depend on the count)."""
+    ref = load_reference(reference) if isinstance(reference, str) else reference
+    settings = settings or CalibrationSettings()
+    key = [ref.name, n_replicates, ramps, n_measurements, settings.to_dict(), str(seed), n_rank]
+    recs = run_replicates(sbc_replicate, (ref,), (ramps, n_measurements, settings, n_rank, scene, radar), key,
+                          n_replicates, seed, checkpoint=checkpoint, workers=workers, progress=progress)
+    out = summarise(recs, n_rank, n_bins)
+    out.update(settings=settings.to_dict(), ramps=ramps, n_measurements=n_measurements)
+    return out
+
+
+def run_replicates(replicate, head: tuple, tail: tuple, key, n_replicates: int, seed, *, checkpoint=None,
+                   workers: int = 1, progress=None) -> list[dict]:
+    """Records ``replicate(*head, i, seed_sequence_i, *tail)`` for i < n_replicates, in
+    order. checkpoint: a JSON-lines file every finished record is appended to; a rerun
+    with the same ``key`` (JSON-able: everything the records depend on) skips the ones
+    it holds (resume). workers: that many processes (each replicate has its own seed
+    from ``seed``, so the records do not depend on the count)."""
     import json
     from concurrent.futures import ProcessPoolExecutor
     from pathlib import Path
 
-    ref = load_reference(reference) if isinstance(reference, str) else reference
-    settings = settings or CalibrationSettings()
-    key = json.dumps([ref.name, n_replicates, ramps, n_measurements, settings.to_dict(), str(seed), n_rank],
-                     default=str)
+    key = json.dumps(key, default=str)
     done: dict[int, dict] = {}
     path = None if checkpoint is None else Path(checkpoint)
     if path is not None and path.is_file():
@@ -129,17 +143,15 @@ def run_sbc(reference: ClassParams | str = "HELI", n_replicates: int = 100, *, r
         if progress:
             progress(len(done), n_replicates)
 
-    args = (ramps, n_measurements, settings, n_rank, scene, radar)
     if workers > 1 and len(todo) > 1:
+        n = len(todo)
         with ProcessPoolExecutor(workers) as pool:
-            for rec in pool.map(sbc_replicate, [ref] * len(todo), *zip(*todo), *[[a] * len(todo) for a in args]):
+            for rec in pool.map(replicate, *[[h] * n for h in head], *zip(*todo), *[[a] * n for a in tail]):
                 record(rec)
     else:
         for i, ss in todo:
-            record(sbc_replicate(ref, i, ss, *args))
-    out = summarise([done[i] for i in sorted(done)], n_rank, n_bins)
-    out.update(settings=settings.to_dict(), ramps=ramps, n_measurements=n_measurements)
-    return out
+            record(replicate(*head, i, ss, *tail))
+    return [done[i] for i in sorted(done)]
 
 
 def summarise(recs: list[dict], n_rank: int, n_bins: int = 5) -> dict:

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 FIT_ALGORITHMS = ("GN_CRS2_LM", "GN_MLSL_LDS", "GN_DIRECT_L", "GN_ISRES", "GN_ESCH")
 LOCAL_ALGORITHMS = ("LN_BOBYQA", "LN_NELDERMEAD", "LN_SBPLX")
-SAMPLERS = ("emcee", "smc")
+SAMPLERS = ("emcee", "smc", "laplace")
 LIKELIHOODS = ("auto", "marginal", "synthetic", "fitted")
 
 

@@ -64,6 +64,14 @@ class ProfileSet:
                                 "remove those rows")
         return self
 
+    def specimens(self, label: str) -> np.ndarray:
+        """The drone (specimen) id of each profile of class ``label`` (n,), as strings:
+        the file's ``specimen`` field, or one drone ``"0"`` when the file has none."""
+        n = int(np.sum(self.labels == label))
+        if "specimen" not in self.extra:
+            return np.full(n, "0")
+        return np.asarray(self.extra["specimen"])[self.labels == label].astype(str)
+
     def select(self, label: str) -> np.ndarray:
         """Profiles (n, L) of one class; error naming the file when absent."""
         mask = self.labels == label
@@ -386,3 +394,8 @@ def _check_metadata(extra: dict, labels: np.ndarray, src: str) -> None:
             if arr.ndim == 0 or arr.shape[0] != n:
                 raise DataFileError(f"{src}: field {key!r} has shape {arr.shape}; expected one entry per profile "
                                     f"({n})")
+    if "specimen" in extra:
+        arr = np.asarray(extra["specimen"])
+        if arr.ndim != 1 or arr.dtype.kind not in "iuUS":
+            raise DataFileError(f"{src}: field 'specimen' has dtype {arr.dtype} and shape {arr.shape}; expected one "
+                                f"integer or string drone id per profile ({n},)")

@@ -1,0 +1,217 @@
+"""The calibrated population of a class: fit from drones, saved, loaded, drawn from.
+
+:func:`calibrate_population` pools the per-drone calibrations of one class
+(:mod:`.population` for the model and the method); :class:`PopulationResult` holds
+the hyper-posterior draws (spreads, and the class's mean drone given each), the
+drones' own posterior draws (for the coordinates no drone identifies), and draws
+new drones: spreads and mean from the hyper-posterior, then the scene simulator's
+specimen model (:meth:`SpecimenSpread.apply`) around that mean. File: NPZ, read
+with ``allow_pickle=False``; every field checked on load, errors name file and field.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..generator.params import N_PARAMS
+from ..generator.specimens import SpecimenSpread
+from ..radar.io import DataFileError, atomic_savez
+from ..radar.seeds import rng as as_rng
+from .population import SPREADS, Hyperprior, PopulationModel, sample_spreads, summarise_drone
+
+FORMAT = "mdaug-population-1"
+POOL_PER_DRONE = 1000  # posterior draws kept per drone (for coordinates no drone identifies)
+ARRAYS = ("spreads", "mu", "measured", "pool", "pool_drone", "drone_means", "reference")
+
+
+def _union_acquisition(results):
+    """The drones' acquisition with the union of their measured carrier and noise ranges."""
+    acqs = [r.measured_acquisition() for r in results]
+    lo = lambda name, i: min(getattr(a, name)[i] for a in acqs)  # noqa: E731
+    hi = lambda name, i: max(getattr(a, name)[i] for a in acqs)  # noqa: E731
+    noise = None if acqs[0].noise_db is None else (lo("noise_db", 0), hi("noise_db", 1))
+    return acqs[0].replace(carrier=(lo("carrier", 0), hi("carrier", 1)), noise_db=noise)
+
+
+def calibrate_population(results, specimens=None, *, reference=None, hyperprior: Hyperprior | None = None,
+                         random_state=None, max_steps: int = 40000) -> "PopulationResult":
+    """The population of one class from its drones' calibrations.
+
+    results: :class:`~.result.CalibrationResult` per drone (same class, engine count
+    and acquisition); specimens: their ids (default "0", "1", ...); reference: the
+    class vector whose labelling the drones are read in (default: the class
+    reference); hyperprior: the spreads' prior (default :meth:`Hyperprior.stated`).
+    """
+    from ..generator import load_reference
+
+    results = list(results)
+    if not results:
+        raise ValueError("calibrate_population needs at least one drone's calibration")
+    names = {r.class_name for r in results}
+    engines = {r.n_engines for r in results}
+    if len(names) != 1 or len(engines) != 1:
+        raise ValueError(f"the drones' calibrations must be of one class and engine count, got classes "
+                         f"{sorted(names)} and engine counts {sorted(engines)}")
+    specimens = [str(s) for s in (specimens if specimens is not None else range(len(results)))]
+    if len(specimens) != len(results) or len(set(specimens)) != len(specimens):
+        raise ValueError(f"need one distinct specimen id per calibration, got {specimens} for {len(results)}")
+    cls, n_eng = names.pop(), engines.pop()
+    ref = np.asarray(reference if reference is not None else load_reference(cls).to_array(), float)
+    if ref.shape != (n_eng * N_PARAMS,):
+        ref = np.resize(ref, n_eng * N_PARAMS)  # a reference with other engines: cycled, as the fit's start
+    gamma0 = float(results[0].priors.gamma0)
+    model = PopulationModel(n_eng)
+    hyperprior = hyperprior or Hyperprior.stated()
+    rng = as_rng(random_state)
+    drones = [summarise_drone(r, model, ref, s) for r, s in zip(results, specimens)]
+    fit = sample_spreads(drones, model, hyperprior, rng, max_steps=max_steps)
+    pool, pool_drone = [], []
+    for k, d in enumerate(drones):
+        keep = np.linspace(0, len(d.draws) - 1, min(POOL_PER_DRONE, len(d.draws))).round().astype(int)
+        pool.append(d.draws[keep]), pool_drone.append(np.full(len(keep), k))
+    means = np.array([model.transform(d.draws).mean(axis=0) for d in drones])
+    meta = {"format": FORMAT, "class_name": cls, "n_engines": n_eng, "gamma0": gamma0,
+            "specimens": specimens, "hyperprior": hyperprior.scales, "coords": model.names,
+            "acquisition": _union_acquisition(results).to_dict(),
+            "drones_converged": [bool(r.converged) for r in results],
+            "identified": [d.mask.tolist() for d in drones],
+            "diagnostics": {"tau": fit["tau"].tolist(), "steps": fit["steps"], "converged": fit["converged"],
+                            "acceptance": fit["acceptance"]}}
+    arrays = {"spreads": fit["spreads"], "mu": fit["mu"], "measured": fit["measured"],
+              "pool": np.concatenate(pool), "pool_drone": np.concatenate(pool_drone), "drone_means": means,
+              "reference": ref}
+    return PopulationResult(arrays, meta)
+
+
+class PopulationResult:
+    """Hyper-posterior of a class's population (see the module doc)."""
+
+    def __init__(self, arrays: dict, meta: dict):
+        self.arrays, self.meta = arrays, meta
+        self.model = PopulationModel(int(meta["n_engines"]))
+
+    # ---- what it holds ----------------------------------------------------------------
+    @property
+    def class_name(self) -> str:
+        return str(self.meta["class_name"])
+
+    @property
+    def n_engines(self) -> int:
+        return int(self.meta["n_engines"])
+
+    @property
+    def n_drones(self) -> int:
+        return len(self.meta["specimens"])
+
+    @property
+    def assumed(self) -> bool:
+        """True when the spreads were assumed (one drone), not measured."""
+        return self.n_drones < 2
+
+    @property
+    def converged(self) -> bool:
+        return bool(self.meta["diagnostics"]["converged"])
+
+    @property
+    def acquisition(self):
+        from ..generator.acquisition import Acquisition
+
+        return Acquisition.from_dict(self.meta["acquisition"], "population attribute 'acquisition'")
+
+    def spreads(self) -> np.ndarray:
+        """Hyper-posterior draws of the spreads (n, 5), columns in :data:`SPREADS` order."""
+        return self.arrays["spreads"]
+
+    def summary(self) -> list[dict]:
+        """One row per spread: prior (half-normal) median and 90% interval, posterior
+        median and 90% interval, and whether the data moved it (``measured``: with two
+        or more drones, the posterior's sd under 0.7 x the prior's or its median more
+        than half a prior sd from the prior's) or it stays ``assumed``."""
+        rows = []
+        z = np.array([0.0627, 0.674, 1.645])  # half-normal quantiles 5%, 50%, 95%
+        for j, name in enumerate(SPREADS):
+            scale = self.meta["hyperprior"][name]
+            q = np.quantile(self.arrays["spreads"][:, j], [0.05, 0.5, 0.95])
+            pq = z * scale
+            draws = self.arrays["spreads"][:, j]
+            prior_sd = scale * np.sqrt(1 - 2 / np.pi)  # half-normal
+            measured = self.n_drones >= 2 and (draws.std() < 0.7 * prior_sd or abs(q[1] - pq[1]) > 0.5 * prior_sd)
+            rows.append({"spread": name, "prior_q05": pq[0], "prior_median": pq[1], "prior_q95": pq[2],
+                         "q05": q[0], "median": q[1], "q95": q[2], "status": "measured" if measured else "assumed"})
+        return rows
+
+    def report(self) -> str:
+        head = (f"population of {self.class_name}: {self.n_drones} drone(s) "
+                f"({', '.join(self.meta['specimens'])}); hyper-posterior "
+                f"{'converged' if self.converged else 'NOT converged'} "
+                f"({self.meta['diagnostics']['steps']} steps, max tau "
+                f"{max(self.meta['diagnostics']['tau']):.0f})")
+        bad = [s for s, ok in zip(self.meta["specimens"], self.meta["drones_converged"]) if not ok]
+        if bad:
+            head += (f"\n  drone calibration(s) NOT converged: {', '.join(bad)}; a drone posterior that is too narrow or "
+                     "off its truth makes the spreads absorb the offset (read them as upper bounds)")
+        if self.assumed:
+            head += "\n  one drone: the spreads are the stated prior (SpecimenSpread's physical guesses), assumed"
+        lines = [head, f"  {'spread':<10} {'prior median [90%]':>24} {'posterior median [90%]':>28}  status"]
+        for r in self.summary():
+            lines.append(f"  {r['spread']:<10} {r['prior_median']:>8.3f} [{r['prior_q05']:.3f}, {r['prior_q95']:.3f}]"
+                         f" {r['median']:>12.3f} [{r['q05']:.3f}, {r['q95']:.3f}]  {r['status']}")
+        return "\n".join(lines)
+
+    # ---- new drones -------------------------------------------------------------------
+    def draw_drones(self, n: int, rng) -> np.ndarray:
+        """n class vectors (n, 13E) of new drones: a hyper-posterior draw (spreads and
+        mean drone; a drone's own posterior draw for coordinates no drone
+        identifies), then the specimen model with those spreads around it. Phases
+        are 0: the acquisition that renders the vectors draws them."""
+        rng = as_rng(rng)
+        a = self.arrays
+        i = rng.integers(len(a["spreads"]), size=n)
+        t = rng.integers(len(a["pool"]), size=n)
+        x = self.model.fill(a["pool"][t], a["mu"][i], a["measured"].astype(bool))
+        out = np.empty_like(x)
+        for u in np.unique(i):
+            rows = np.flatnonzero(i == u)
+            spread = SpecimenSpread(**dict(zip(SPREADS, a["spreads"][u].tolist())))
+            out[rows] = spread.apply(x[rows], rng)
+        return out
+
+    # ---- files ------------------------------------------------------------------------
+    def save(self, path) -> Path:
+        return atomic_savez(path, meta=np.array(json.dumps(self.meta)), **self.arrays)
+
+    @classmethod
+    def load(cls, path, *, class_name: str | None = None) -> "PopulationResult":
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                files = {k: z[k] for k in z.files}
+        except (OSError, ValueError) as e:
+            raise DataFileError(f"{path}: not a readable population file ({e})") from None
+        missing = [k for k in ARRAYS + ("meta",) if k not in files]
+        if missing:
+            raise DataFileError(f"{path}: not a population file, missing field(s) {missing}")
+        try:
+            meta = json.loads(str(files.pop("meta")))
+        except ValueError:
+            raise DataFileError(f"{path}: field 'meta' is not JSON") from None
+        if meta.get("format") != FORMAT:
+            raise DataFileError(f"{path}: field 'meta' format {meta.get('format')!r}, expected {FORMAT!r}")
+        res = cls({k: files[k] for k in ARRAYS}, meta)
+        p, e13 = res.model.p, res.n_engines * N_PARAMS
+        q = int(res.arrays["measured"].sum())
+        want = {"spreads": (None, len(SPREADS)), "mu": (len(res.arrays["spreads"]), q), "measured": (p,),
+                "pool": (None, e13), "pool_drone": (len(res.arrays["pool"]),), "drone_means": (res.n_drones, p),
+                "reference": (e13,)}
+        for k, shape in want.items():
+            got = res.arrays[k].shape
+            if len(got) != len(shape) or any(s is not None and s != g for s, g in zip(shape, got)):
+                raise DataFileError(f"{path}: field {k!r} has shape {got}, expected {shape} "
+                                    f"(None: any) for {res.n_engines} engine(s)")
+            if k != "measured" and not np.all(np.isfinite(res.arrays[k])):
+                raise DataFileError(f"{path}: field {k!r} holds NaN or infinite values")
+        if class_name is not None and res.class_name != class_name.upper():
+            raise DataFileError(f"{path}: population of class {res.class_name!r}, expected {class_name.upper()!r}")
+        return res

@@ -1,0 +1,146 @@
+"""Population calibration: the specimen model in log coordinates, the closed-form
+marginal over the class mean, spread recovery, new drones, the population file."""
+import numpy as np
+import pytest
+
+from mdaug.generator import load_reference
+from mdaug.generator.specimens import SpecimenSpread
+from mdaug.inference.population import (SPREADS, DroneSummary, Hyperprior, PopulationModel, log_marginal,
+                                        sample_spreads)
+from mdaug.inference.population_result import PopulationResult
+from mdaug.radar.io import DataFileError
+
+
+def _model(cls="HELI"):
+    ref = load_reference(cls)
+    x0 = ref.to_array()
+    return PopulationModel(ref.n_engines), x0
+
+
+def _drones(model, x0, spread, n, noise, rng):
+    """n drones of the specimen model, each measured with Gaussian noise of sd ``noise`` in y."""
+    xs = spread.apply(np.repeat(x0[None], n, 0), rng)
+    ys = model.transform(xs)
+    return [DroneSummary(str(d), np.ones(model.p, bool), ys[d] + noise * rng.standard_normal(model.p),
+                         noise ** 2 * np.eye(model.p), xs[d:d + 1]) for d in range(n)]
+
+
+def test_covariance_is_the_specimen_models_in_log_coordinates():
+    """Sigma(spreads) matches the sample covariance of ln(SpecimenSpread.apply(x)) (small spreads)."""
+    model, x0 = _model("QUAD")
+    spreads = np.array([0.03, 0.01, 0.02, 0.02, 0.01])
+    rng = np.random.default_rng(0)
+    xs = SpecimenSpread(**dict(zip(SPREADS, spreads))).apply(np.repeat(x0[None], 40000, 0), rng)
+    emp = np.cov(model.transform(xs), rowvar=False)
+    sig = model.covariance(spreads)
+    assert np.abs(emp - sig).max() < 0.08 * sig.max()
+    freq = model.kinds == "frequency"
+    # one motor-speed factor: every pair of frequencies (also across engines) covaries by speed^2
+    assert np.allclose(sig[np.ix_(freq, freq)] - np.diag(np.diag(sig))[np.ix_(freq, freq)],
+                       spreads[0] ** 2 * (1 - np.eye(freq.sum())))
+
+
+def test_log_marginal_is_the_gaussian_integral_over_the_class_mean():
+    """Two drones: the closed form equals N(m1 - m2; 0, C1 + C2) (flat prior on mu); one
+    drone: constant 0 (the spreads are not identified)."""
+    model, _ = _model()
+    rng = np.random.default_rng(1)
+    p = model.p
+    a = rng.standard_normal((p, p)) * 0.05
+    c1, c2 = a @ a.T + 0.01 * np.eye(p), 0.02 * np.eye(p)
+    m1, m2 = rng.standard_normal(p) * 0.1, rng.standard_normal(p) * 0.1
+    d1 = DroneSummary("a", np.ones(p, bool), m1, c1, np.zeros((1, 13)))
+    d2 = DroneSummary("b", np.ones(p, bool), m2, c2, np.zeros((1, 13)))
+    spreads = np.array([[0.05, 0.02, 0.15, 0.15, 0.01], [0.1, 0.05, 0.3, 0.1, 0.05]])
+    got, mu, P = log_marginal(spreads, [d1, d2], model, np.ones(p, bool))
+    from scipy.stats import multivariate_normal
+    for w, s in enumerate(spreads):
+        sig = model.covariance(s)
+        want = multivariate_normal(np.zeros(p), c1 + c2 + 2 * sig).logpdf(m1 - m2)
+        assert got[w] == pytest.approx(want, abs=1e-8)
+        # mu | spreads: the precision-weighted mean of the two drones
+        i1, i2 = np.linalg.inv(c1 + sig), np.linalg.inv(c2 + sig)
+        assert np.allclose(mu[w], np.linalg.solve(i1 + i2, i1 @ m1 + i2 @ m2))
+    one, _, _ = log_marginal(spreads, [d1], model, np.ones(p, bool))
+    assert np.allclose(one, 0.0, atol=1e-9)
+
+
+def test_spreads_recovered_from_many_well_measured_drones():
+    """30 HELI drones drawn by the scene's specimen model, each measured to 1% in y:
+    the hyper-posterior's 90% intervals hold the true speed, frequency, amplitude
+    and skew spreads; gamma (no Gamma ratio in a one-engine class) stays at its prior."""
+    model, x0 = _model()
+    rng = np.random.default_rng(2)
+    true = np.array([0.08, 0.03, 0.12, 0.15, 0.02])
+    drones = _drones(model, x0, SpecimenSpread(**dict(zip(SPREADS, true))), 30, 0.01, rng)
+    out = sample_spreads(drones, model, Hyperprior(), rng, max_steps=6000)
+    q = np.quantile(out["spreads"], [0.05, 0.95], axis=0)
+    for j, name in enumerate(SPREADS[:3] + ("skew",)):
+        k = SPREADS.index(name)
+        assert q[0, k] < true[k] < q[1, k], (name, q[:, k])
+    g = SPREADS.index("gamma")
+    prior = Hyperprior().scales["gamma"]
+    assert 0.5 * prior < np.median(out["spreads"][:, g]) < 1.3 * prior  # half-normal median 0.674 x scale
+    assert out["mu"].shape == (len(out["spreads"]), model.p)
+
+
+def _result(model, x0, n_drones=3, seed=3):
+    rng = np.random.default_rng(seed)
+    drones = _drones(model, x0, SpecimenSpread(), n_drones, 0.02, rng)
+    fit = sample_spreads(drones, model, Hyperprior(), rng, max_steps=3000)
+    from mdaug.generator.acquisition import Acquisition
+    pool = np.concatenate([d.draws for d in drones])
+    meta = {"format": "mdaug-population-1", "class_name": "HELI", "n_engines": 1, "gamma0": float(x0[0]),
+            "specimens": [d.specimen for d in drones], "hyperprior": Hyperprior().scales, "coords": model.names,
+            "acquisition": Acquisition.measured(4).to_dict(), "drones_converged": [True] * n_drones,
+            "identified": [d.mask.tolist() for d in drones],
+            "diagnostics": {"tau": fit["tau"].tolist(), "steps": fit["steps"], "converged": fit["converged"],
+                            "acceptance": fit["acceptance"]}}
+    arrays = {"spreads": fit["spreads"], "mu": fit["mu"], "measured": fit["measured"], "pool": pool,
+              "pool_drone": np.arange(len(pool)), "drone_means": model.transform(pool), "reference": x0}
+    return PopulationResult(arrays, meta)
+
+
+def test_new_drones_spread_around_the_class_mean(tmp_path):
+    model, x0 = _model()
+    res = _result(model, x0)
+    x = res.draw_drones(4000, np.random.default_rng(0))
+    assert x.shape == (4000, 13) and np.all(np.isfinite(x))
+    y = model.transform(x)
+    freq = model.kinds == "frequency"
+    # a new drone's frequencies move together (the common motor-speed factor)
+    c = np.corrcoef(y[:, freq], rowvar=False)[0, 1]
+    assert c > 0.3
+    # its spread is at least the population's and the mean's uncertainty together
+    sd = y.std(axis=0)
+    assert np.all(sd[freq] > 0.5 * np.median(res.spreads()[:, 0]))
+    # reproducible from the one seed
+    assert np.array_equal(res.draw_drones(10, np.random.default_rng(5)), res.draw_drones(10, np.random.default_rng(5)))
+    # saved and loaded unchanged
+    path = res.save(tmp_path / "pop.npz")
+    back = PopulationResult.load(path, class_name="heli")
+    assert np.array_equal(back.draw_drones(10, np.random.default_rng(5)), res.draw_drones(10, np.random.default_rng(5)))
+    assert "population of HELI: 3 drone(s)" in back.report()
+
+
+def test_population_file_errors_name_file_and_field(tmp_path):
+    model, x0 = _model()
+    res = _result(model, x0, n_drones=2)
+    arrays = dict(res.arrays)
+    arrays["mu"] = arrays["mu"][:, :-1]
+    bad = PopulationResult(arrays, res.meta).save(tmp_path / "bad.npz")
+    with pytest.raises(DataFileError, match=r"bad.npz: field 'mu' has shape"):
+        PopulationResult.load(bad)
+    with pytest.raises(DataFileError, match="population of class 'HELI', expected 'QUAD'"):
+        PopulationResult.load(res.save(tmp_path / "ok.npz"), class_name="QUAD")
+    np.savez(tmp_path / "other.npz", profiles=np.zeros((2, 3)))
+    with pytest.raises(DataFileError, match=r"other.npz: not a population file, missing field"):
+        PopulationResult.load(tmp_path / "other.npz")
+
+
+def test_one_drone_spreads_are_assumed():
+    model, x0 = _model()
+    res = _result(model, x0, n_drones=1)
+    assert res.assumed
+    assert all(r["status"] == "assumed" for r in res.summary())
+    assert "assumed" in res.report()
