@@ -45,7 +45,8 @@ def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n
     scene = SceneConfig(n_ramps=ramps, speed_spread=s["speed"], frequency_spread=s["frequency"],
                         amplitude_spread=s["amplitude"], gamma_spread=s["gamma"], skew_spread=s["skew"])
     t0 = time.perf_counter()
-    camp = simulate_campaign(ref, n_drones + 1, (n_drones + 1) * n_acquisitions, data_ss, scene=scene)
+    camp = simulate_campaign(ref, n_drones + 1, (n_drones + 1) * n_acquisitions, int(data_ss.generate_state(1)[0]),
+                             scene=scene)
     results = [calibrate(camp.profiles[camp.specimen == d], ref, acquisition=camp.acquisition, settings=settings,
                          random_state=seed_sequence(run_ss, d)) for d in range(n_drones)]
     pop = calibrate_population(results, random_state=pop_ss)

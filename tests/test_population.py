@@ -144,3 +144,25 @@ def test_one_drone_spreads_are_assumed():
     assert res.assumed
     assert all(r["status"] == "assumed" for r in res.summary())
     assert "assumed" in res.report()
+
+
+@pytest.mark.slow
+def test_population_sbc_runs_and_resumes(tmp_path):
+    """Two small population SBC replicates (HELI, 2 drones x 3 acquisitions at K = 4,
+    cheap calibrations): ranks of the 5 spreads and the unseen drone's lines within
+    0..n_rank, and a rerun on the checkpoint does no new work."""
+    from mdaug.inference import CalibrationSettings
+    from mdaug.inference.population_sbc import run_population_sbc
+
+    settings = CalibrationSettings(sampler="laplace", n_starts=1, fit_budget=200, polish_budget=100,
+                                   n_particles=300, progress=False)
+    ck = tmp_path / "sbc.jsonl"
+    kw = dict(n_drones=2, n_acquisitions=3, ramps=4, settings=settings, seed=3, n_rank=19, checkpoint=ck)
+    out = run_population_sbc("HELI", 2, **kw)
+    ranks = out["all"]["ranks"]
+    assert ranks.shape == (2, 5 + 8) and ranks.min() >= 0 and ranks.max() <= 19
+    assert out["spreads"]["names"] == [f"spread:{n}" for n in SPREADS]
+    assert len(ck.read_text().splitlines()) == 2
+    again = run_population_sbc("HELI", 2, **kw)
+    assert np.array_equal(again["all"]["ranks"], ranks)
+    assert len(ck.read_text().splitlines()) == 2
