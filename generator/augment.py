@@ -239,7 +239,7 @@ class ModelAugmenter(Augmenter):
         large = n > (CHAIN_BAR_AT if self.renderer.through_chain else 4 * DEFAULT_BATCH)  # a few seconds of work
         show = progress if progress is not None else (None if large else False)
         with progress_bar(total=n, desc=f"{self.label} profiles", unit="profile", progress=show, leave=False) as bar:
-            out = self.renderer.render(params, np.random.default_rng(seed_sequence(rng)), progress=bar.update)
+            out = self.renderer.render(params, as_generator(seed_sequence(rng)), progress=bar.update)
         return AugmentedBatch(profiles=out, labels=np.full(n, self.label), params=params, settings=self.settings())
 
     def settings(self) -> dict:

@@ -70,10 +70,11 @@ from math import comb, factorial
 import numpy as np
 import scipy.fft
 
+from ..radar.seeds import rng as as_generator
 from ..radar.seeds import seed_sequence
 from ..radar import C0, RadarConfig
 from ..radar.chain import ChainConfig, angle_fft, angle_grid_deg
-from .model import TWO_PI, _wrap, vibration_terms
+from .model import TWO_PI, wrap_phase, vibration_terms
 from .params import N_PARAMS, validate_vectors
 from .scene import SceneConfig, draw_acquisitions, literal_chain, true_vectors
 
@@ -166,7 +167,7 @@ def render_through_chain(x, scene: SceneConfig = SceneConfig(), radar: RadarConf
     n = x.shape[0]
     root = seed_sequence(random_state)
     ss_draw, ss_noise = root.spawn(2)
-    d = draw_acquisitions(x, n, scene, radar, np.random.default_rng(ss_draw))  # row i -> acquisition i
+    d = draw_acquisitions(x, n, scene, radar, as_generator(ss_draw))  # row i -> acquisition i
     noise_seeds = ss_noise.spawn(n)
     if method == "literal":
         out = _literal(d, scene, radar, chain, noise_seeds, chunk_size)
@@ -188,7 +189,7 @@ def render_through_chain(x, scene: SceneConfig = SceneConfig(), radar: RadarConf
 
 
 def _literal(d, scene, radar, chain, noise_seeds, chunk_size) -> dict:
-    rngs = [np.random.default_rng(ss) for ss in noise_seeds]
+    rngs = [as_generator(ss) for ss in noise_seeds]
     rows, _ = literal_chain(d, scene, radar, chain, rngs, chunk=chunk_size)
     pick = lambda key, dt: np.array([getattr(res, key)[j] for res, j in rows], dtype=dt)  # noqa: E731
     return {"profiles": pick("signatures", np.float32), "peak_bin": pick("peak_bin", np.int64),
@@ -323,7 +324,7 @@ def _linear_phase(d, sl, plan, scene, radar, base_bin):
     r = r_all[:, plan.frames]
     r_beat = r if scene.drift_shifts_range else np.repeat(r_all[:, -1:], len(plan.frames), axis=1)
     slope = radar.model_k * 0.5 * r_beat - TWO_PI * base_bin[:, None] * radar.sample_rate_hz / radar.fft_points
-    return slope, _wrap(4 * np.pi * radar.centre_frequency_hz / C0 * r)
+    return slope, wrap_phase(4 * np.pi * radar.centre_frequency_hz / C0 * r)
 
 
 def _phase_basis(w, t, radar, dtype) -> np.ndarray:
@@ -424,7 +425,7 @@ def _target_terms(d, sl, plan, scene, radar, base_bin, step, work):
     zi = np.matmul(gamma, sin.reshape(n, e, -1), out=work.buf("zi", (n, 1, jk * t.size), plan.rdt))
     body = None
     if np.any(d.body_gamma[sl] > 0):
-        bphase = (slope[..., None] * t + _wrap(offset + d.body_phase[sl][:, None])[..., None]).astype(plan.rdt)
+        bphase = (slope[..., None] * t + wrap_phase(offset + d.body_phase[sl][:, None])[..., None]).astype(plan.rdt)
         body = np.empty(bphase.shape, plan.cdt)  # (n, J, S): g e^{i bphase}
         g = d.body_gamma[sl][:, None, None].astype(plan.rdt)
         body.real, body.imag = g * np.cos(bphase), g * np.sin(bphase)
@@ -541,7 +542,7 @@ class _Noise:
     def __init__(self, seeds, sigma, plan: _Plan, n_ramps: int, work: _Work):
         r, n_ant = plan.basis.shape[0], plan.steer.shape[1]
         self.work = work
-        rngs = (np.random.default_rng(ss) for ss in seeds)
+        rngs = (as_generator(ss) for ss in seeds)
         self.zeta = np.stack([_complex_normal(rng, (n_ant, n_ramps, r), plan.rdt) for rng in rngs])
         self.zeta *= sigma.astype(plan.rdt)[:, None, None, None]
         self.basis_t, self.vt, self.k = plan.basis, plan.steer, n_ramps  # (r, rows), (n_a, A)

@@ -53,7 +53,9 @@ import numpy as np
 
 from ..radar import C0, DataFileError, ProfileSet, RadarConfig, atomic_savez, read_arrays
 from ..radar.chain import ChainConfig, process_cube
-from .model import _wrap, if_signal, vibration_terms
+from ..radar.seeds import rng as as_generator
+from ..radar.seeds import seed_sequence
+from .model import wrap_phase, if_signal, vibration_terms
 from .acquisition import PHASE_TREATMENTS, frame_phases, yaw_mix
 from .params import IDX, N_PARAMS, PHASES, ClassParams, load_reference
 from .specimens import SpecimenSpread
@@ -226,7 +228,7 @@ def _target_iq(d: Draws, sl: slice, scene: SceneConfig, radar: RadarConfig):
     i_sig, q_sig = both[: len(rows)], both[len(rows):]
     if np.any(d.body_gamma[sl] > 0):
         t = np.arange(radar.samples_per_chirp) / radar.sample_rate_hz
-        bphase = _wrap(radar.model_k * r0[:, None] * t + (carrier + np.repeat(d.body_phase[sl], f * k))[:, None])
+        bphase = wrap_phase(radar.model_k * r0[:, None] * t + (carrier + np.repeat(d.body_phase[sl], f * k))[:, None])
         g = np.repeat(d.body_gamma[sl], f * k)[:, None]
         i_sig += (g * np.cos(bphase)).astype(scene.dtype)
         q_sig -= (g * np.sin(bphase)).astype(scene.dtype)
@@ -434,11 +436,11 @@ def simulate_campaign(reference: ClassParams | str, n_specimens: int, n_acquisit
         if isinstance(v, bool) or int(v) != v or v < 1:
             raise ValueError(f"{name} must be a positive integer, got {v!r}")
     n = int(n_acquisitions)
-    root = np.random.SeedSequence(seed)  # seed=None: fresh entropy, recorded in settings
+    root = seed_sequence(seed)  # seed=None: fresh entropy, recorded in settings
     ss_spec, ss_draw, ss_noise = root.spawn(3)
-    specimens = draw_specimens(ref.to_array(), int(n_specimens), scene, np.random.default_rng(ss_spec))
-    d = draw_acquisitions(specimens, n, scene, radar, np.random.default_rng(ss_draw))
-    noise_rngs = [np.random.default_rng(s) for s in ss_noise.spawn(n)]
+    specimens = draw_specimens(ref.to_array(), int(n_specimens), scene, as_generator(ss_spec))
+    d = draw_acquisitions(specimens, n, scene, radar, as_generator(ss_draw))
+    noise_rngs = [as_generator(s) for s in ss_noise.spawn(n)]
     f = scene.frames(radar)
     rows, cubes = literal_chain(d, scene, radar, chain, noise_rngs, keep_cubes=keep_cubes)
     pick = lambda key: np.array([getattr(res, key)[j] for res, j in rows])  # noqa: E731
