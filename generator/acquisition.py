@@ -45,8 +45,7 @@ import numpy as np
 import scipy.fft
 
 from ..radar import RadarConfig, centred_slices, check_normalisation, normalise
-from ..radar.seeds import rng as as_generator
-from ..radar.seeds import seed_sequence
+from ..radar.seeds import rng as as_generator, seed_sequence
 from .model import if_signal, magnitude_spectra, profiles as model_profiles, vibration_terms, wrap_phase
 from .params import IDX, N_PARAMS, PHASES, validate_vectors
 

@@ -19,21 +19,20 @@ Physics and conventions (units: m, rad, deg where named):
   elements at lambda/2; element n adds pi n sin(azimuth) to the carrier phase. The
   per-antenna signals are I cos(psi_n) + Q sin(psi_n) with I, Q the target return
   at carrier phase 0 and pi/2, so the vibration model runs twice, not A times.
-* Vibration phases: ``phases="uniform"`` draws all 4 E term phases uniformly per
-  frame (a chirp starts at an arbitrary rotor phase); ramps within a frame advance
-  them by w * ramp period (as :func:`mdaug.generator.spectra`). ``"fixed"`` keeps the
-  specimen's phases in every frame.
-* Yaw psi ~ U(-yaw_deg, yaw_deg) mixes the roll and pitch amplitudes, energy
-  preserving (the two are incoherent components of one tilt vector seen through a
-  rotated axis): A_a' = sqrt((A_a cos psi)^2 + (A_b sin psi)^2),
-  A_b' = sqrt((A_a sin psi)^2 + (A_b cos psi)^2); frequencies and mixing terms stay.
+* Vibration phases: the acquisition's phase rule (:func:`~..acquisition.frame_phases`):
+  ``"uniform"`` draws all 4 E term phases uniformly per frame (a chirp starts at an
+  arbitrary rotor phase); ramps within a frame advance them by w * ramp period (as
+  :func:`mdaug.generator.spectra`). ``"fixed"`` keeps the specimen's phases in every frame.
+* Yaw psi ~ U(-yaw_deg, yaw_deg) of the acquisition mixes the roll and pitch
+  amplitudes, energy preserving (:func:`~..acquisition.yaw_mix`); frequencies and
+  mixing terms stay.
 * Hover drift: a random walk of the physical range between frames (step
   N(0, drift_step_m)), constant within a frame; it sets the carrier phase of the
   whole target return (what lets a hovering drone survive the MTI) and, with
   ``drift_shifts_range``, its beat frequency too (without: the beat frequency stays
   at the last frame's range in every frame).
 * Body: a non-vibrating tone at the target's range (moves with the drift), Gamma
-  ``U(body_ratio) * sum(Gamma_k)``, random phase relative to the engines.
+  ``U(acquisition.carrier) * sum(Gamma_k)``, random phase relative to the engines.
 * Clutter: ``n_clutter`` static point scatterers (fixed across frames), uniform in
   range and azimuth, amplitude U(clutter_db) dB relative to the target's rms
   amplitude sqrt(2 P_s).
@@ -41,11 +40,9 @@ Physics and conventions (units: m, rad, deg where named):
   the target's mean power per IF sample (``snr_db=None``: none).
 * ADC: gain control per acquisition puts the largest |sample| at ``agc_fill`` of
   full scale, then rounding to ``radar.adc_bits``-bit codes (int16).
-* Specimens: a common motor-speed factor N(1, speed_spread) scales every w_a, w_b
-  (and so w_p, w_m); each w_a, w_b also gets (1 + N(0, frequency_spread)),
-  amplitudes (1 + N(0, amplitude_spread)), Gamma (1 + N(0, gamma_spread)), C_p, C_m
-  (1 + N(0, skew_spread)), all magnitudes taken; ``specimen_spread`` multiplies all
-  spreads (0: every specimen is the class reference exactly).
+* Specimens: the scene's specimen model (:class:`~..specimens.SpecimenSpread`: a
+  common motor-speed factor, frequency, amplitude, Gamma and skew spreads, all
+  scaled by ``width``; 0: every specimen is the class reference exactly).
 """
 from __future__ import annotations
 
