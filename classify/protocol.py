@@ -23,7 +23,6 @@ reused on a rerun with the same settings: an interrupted sweep resumes.
 from __future__ import annotations
 
 import csv
-import hashlib
 import io
 import json
 import time
@@ -32,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..radar.keys import cache_key
 from ..radar.seeds import child_seed
 from .metrics import evaluate
 from .models import make_classifier
@@ -88,13 +88,13 @@ def run_sweep_job(job: SweepJob, on_cell=None) -> list[dict]:
 
 
 def _job_key(job: SweepJob) -> str:
-    tests = {k: [np.asarray(v[0]).shape, hashlib.sha1(np.ascontiguousarray(v[0]).tobytes()).hexdigest(),
-                 hashlib.sha1("|".join(np.asarray(v[1]).astype(str).tolist()).encode()).hexdigest()]
+    tests = {k: [np.asarray(v[0]).shape, cache_key(arrays=[v[0]], algorithm="sha1", length=None),
+                 cache_key(text="|".join(np.asarray(v[1]).astype(str).tolist()), algorithm="sha1", length=None)]
              for k, v in job.test_sets.items()}
     desc = {"sigma_p": job.sigma_p, "seed": job.train_seed, "models": list(job.models),
             "params": job.model_params, "tests": tests, "n_boot": job.n_boot,
             "make_train": getattr(job.make_train, "cache_key", repr(job.make_train))}
-    return hashlib.sha1(json.dumps(desc, sort_keys=True, default=str).encode()).hexdigest()[:16]
+    return cache_key(desc, algorithm="sha1")
 
 
 @dataclass

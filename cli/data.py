@@ -17,7 +17,7 @@ def _pair(v) -> str:
 
 # ---- simulate ------------------------------------------------------------------------------
 def scene_from_args(args):
-    from ..generator.scene import SceneConfig
+    from ..generator.chain import SceneConfig
 
     d = SceneConfig()
     return SceneConfig(
@@ -52,7 +52,7 @@ def run_simulate(args) -> int:
     import time
 
     from ..generator import load_reference
-    from ..generator.scene import save_campaigns, simulate_campaign
+    from ..generator.chain import save_campaigns, simulate_campaign
     from ..radar import RadarConfig
     from ..radar.seeds import child_seed
     from .guard import Output, check_paths
@@ -90,7 +90,7 @@ def run_simulate(args) -> int:
 
 
 def add_simulate(sub, parents, help):
-    from ..generator.scene import SceneConfig
+    from ..generator.chain import SceneConfig
 
     d = SceneConfig()
     p = add_verb(sub, "simulate", parents, help=help, interrupted=nothing_written,

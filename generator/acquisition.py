@@ -45,8 +45,8 @@ import numpy as np
 import scipy.fft
 
 from ..radar import RadarConfig, centred_slices, check_normalisation, normalise
-from ..radar.seeds import seed_sequence
-from .model import if_signal, magnitude_spectra, profiles as model_profiles, vibration_terms
+from ..radar.seeds import rng as as_generator, seed_sequence
+from .model import if_signal, magnitude_spectra, profiles as model_profiles, vibration_terms, wrap_phase
 from .params import IDX, N_PARAMS, PHASES, validate_vectors
 
 PHASE_TREATMENTS = ("fixed", "uniform")
@@ -218,6 +218,12 @@ def frame_phases(x: np.ndarray, n_frames: int, treatment: str, rng: np.random.Ge
     return np.repeat(ph[:, None], n_frames, axis=1)
 
 
+def residual_offsets(shape, treatment: str, rng: np.random.Generator) -> np.ndarray:
+    """Phase offsets (n, E, 4) of the MTI residual frame from the current frame, kept
+    over the ramps: uniform on [-pi, pi) under ``uniform`` phases, none under ``fixed``."""
+    return rng.uniform(-np.pi, np.pi, size=shape) if treatment == "uniform" else np.zeros(shape)
+
+
 def with_phases(x: np.ndarray, phases: np.ndarray) -> np.ndarray:
     """Copy of x (n, 13E) with its term phases replaced by phases (n, E, 4)."""
     out = np.array(x, dtype=np.float64, copy=True)
@@ -303,11 +309,7 @@ def draw_acquisitions(x, acq: Acquisition, rng: np.random.Generator,
     out = AcquisitionDraws(x=seen, r0=r0, carrier=carrier, carrier_phase=carrier_phase, noise_sigma=sigma,
                            yaw_deg=yaw)
     if acq.mti_depth:
-        if acq.phases == "uniform":  # the residual's phases: the current ones + an offset kept over the ramps
-            res_phases = phases + rng.uniform(-np.pi, np.pi, size=phases.shape)
-        else:
-            res_phases = phases
-        out.residual_x = with_phases(seen, res_phases)
+        out.residual_x = with_phases(seen, phases + residual_offsets(phases.shape, acq.phases, rng))
         out.residual_r0 = r0 + acq.drift_bins * rng.standard_normal(n) * radar.model_range_per_bin()
         out.residual_phase = rng.uniform(-np.pi, np.pi, n)
     return out
@@ -332,7 +334,7 @@ def ramp_signals(d: AcquisitionDraws, acq: Acquisition, radar: RadarConfig, ramp
     if np.any(d.carrier > 0):
         t = np.arange(radar.samples_per_chirp) / radar.sample_rate_hz
         phase = radar.model_k * d.r0[:, None] * t + d.carrier_phase[:, None]
-        phase = phase - 2 * np.pi * np.rint(phase / (2 * np.pi))
+        phase = wrap_phase(phase)
         tone = (d.carrier[:, None] * np.cos(phase)).astype(sig.dtype)
         sig += np.repeat(tone, k, axis=0)
     return sig.reshape(n, k, -1)
@@ -373,7 +375,7 @@ def render(x, acq: Acquisition, rng, radar: RadarConfig = RadarConfig(), *, norm
     x = validate_vectors(x, physical=False)
     if acq.is_published and draws is None:
         return model_profiles(x, radar, normalisation=normalisation, dtype=dtype, on_edge="pad")
-    rng = np.random.default_rng(rng) if not isinstance(rng, np.random.Generator) else rng
+    rng = as_generator(rng)
     d = draws if draws is not None else acq.draw(x, rng, radar)
     n = len(d)
     noise_seed = seed_sequence(rng)
@@ -381,7 +383,7 @@ def render(x, acq: Acquisition, rng, radar: RadarConfig = RadarConfig(), *, norm
     out = np.empty((n, radar.slice_length), dtype=dtype)
     for b, lo in enumerate(range(0, n, NOISE_BLOCK)):
         sl = slice(lo, min(n, lo + NOISE_BLOCK))
-        mag = render_spectra(d.take(sl), acq, radar, dtype=dtype, noise_rng=np.random.default_rng(streams[b]))
+        mag = render_spectra(d.take(sl), acq, radar, dtype=dtype, noise_rng=as_generator(streams[b]))
         win, _ = centred_slices(mag, np.argmax(mag, axis=1), radar.slice_length)
         out[sl] = normalise(win, normalisation)
         if progress is not None:

@@ -48,9 +48,9 @@ class Renderer:
     Fast path (default): f(x) with the acquisition's ramps, phases, jitter, carrier
     return, noise floor, yaw and MTI residual (:func:`.acquisition.render`). Chain
     path (``through_chain``): each vector becomes one raw acquisition of the scene
-    simulator (``scene``: range, azimuth, drift, clutter, noise, ADC; its ramps,
-    phases, yaw and body return taken from the acquisition) processed by the radar
-    chain (:func:`.chain_path.render_through_chain`, reduced computation)."""
+    simulator (``scene``: range, azimuth, drift, clutter, noise, ADC; its acquisition
+    this one: ramps, phases, yaw and body return) processed by the radar
+    chain (:func:`.chain.render_through_chain`, reduced computation)."""
 
     acquisition: Acquisition = Acquisition()
     normalisation: str = "peak"
@@ -66,13 +66,10 @@ class Renderer:
         object.__setattr__(self, "dtype", np.dtype(self.dtype).name)
 
     def scene_config(self):
-        """The scene of the chain path: ``scene`` (default scene) with the acquisition's
-        ramps, phase treatment, yaw and carrier (body) return."""
-        from .scene import SceneConfig
+        """The scene of the chain path: ``scene`` (default scene) under this acquisition."""
+        from .chain import SceneConfig
 
-        base = self.scene if self.scene is not None else SceneConfig()
-        a = self.acquisition
-        return base.replace(n_ramps=a.ramps, phases=a.phases, yaw_deg=a.yaw_deg, body_ratio=a.carrier)
+        return (self.scene if self.scene is not None else SceneConfig()).replace(acquisition=self.acquisition)
 
     def render(self, x, rng, progress=None) -> np.ndarray:
         """Profiles (n, L) in ``dtype`` of vectors x (n, 13E); bounded memory whatever n,
@@ -81,7 +78,7 @@ class Renderer:
         from ..radar import normalise
 
         if self.through_chain:
-            from .chain_path import render_through_chain
+            from .chain import render_through_chain
 
             res = render_through_chain(x, self.scene_config(), self.radar, random_state=rng, progress=progress)
             return normalise(res.profiles.astype(np.float64), self.normalisation).astype(self.dtype)
@@ -239,7 +236,7 @@ class ModelAugmenter(Augmenter):
         large = n > (CHAIN_BAR_AT if self.renderer.through_chain else 4 * DEFAULT_BATCH)  # a few seconds of work
         show = progress if progress is not None else (None if large else False)
         with progress_bar(total=n, desc=f"{self.label} profiles", unit="profile", progress=show, leave=False) as bar:
-            out = self.renderer.render(params, np.random.default_rng(seed_sequence(rng)), progress=bar.update)
+            out = self.renderer.render(params, as_generator(seed_sequence(rng)), progress=bar.update)
         return AugmentedBatch(profiles=out, labels=np.full(n, self.label), params=params, settings=self.settings())
 
     def settings(self) -> dict:

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..radar import DataFileError, ProfileSet, RadarConfig, atomic_savez, load_profiles, package_version
-from ..radar.seeds import seed_sequence
+from ..radar.seeds import rng as as_generator
 from .augment import Augmenter
 
 
@@ -84,7 +84,7 @@ def make_dataset(augmenters: list[Augmenter], n_per_class: int, seed,
     if isinstance(n_per_class, bool) or not isinstance(n_per_class, (int, np.integer)) or n_per_class <= 0:
         raise ValueError(f"n_per_class must be a positive integer, got {n_per_class!r}")
     check_dataset_memory(augmenters, n_per_class)
-    parts = [a.sample(n_per_class, np.random.default_rng(seed_sequence(seed, "class", a.label)), progress=progress)
+    parts = [a.sample(n_per_class, as_generator(seed, "class", a.label), progress=progress)
              for a in augmenters]
     settings = {
         "seed": seed if not isinstance(seed, np.random.SeedSequence) else str(seed.entropy),

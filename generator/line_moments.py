@@ -26,12 +26,9 @@ differ in two blocks of D, so each such D has one pair.
 
 How it is computed (:func:`line_sums`, compiled with numba):
 
-* g_n is a polynomial in u = t / T_chirp (the Bessel series of each factor,
-  truncated at degree :data:`MAX_DEGREE`), so c_n(b) = sum_p a_{n,p} K_p(theta),
-  K_p(theta) = sum_s (s / N)^p e^{i theta s}; the K_p are tabulated once
-  (:func:`kernel_table`, 8 points per FFT bin) and a line between table points
-  is reached by a Taylor step K_p(theta + d) = sum_q (i N d)^q / q! K_{p+q}(theta)
-  (4 terms: error below 1e-8 of the line);
+* g_n is a polynomial in u = t / T_chirp (the Bessel series of each factor), so
+  c_n(b) = sum_p a_{n,p} K_p(theta) with the kernel table K_p and its Taylor step
+  between table points (:mod:`.line_tables`: error below 1e-8 of the line);
 * lines whose envelope bound is below ``amp_tol`` of sum(Gamma) are dropped (the
   bound depends on the amplitudes only, so the result stays smooth in every
   frequency); pairs are summed over the lines whose power at the bin is at least
@@ -45,23 +42,15 @@ phase) without recomputing the pair sums (:mod:`mdaug.inference.closed_form`).
 """
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
 
 from ..radar import RadarConfig
+from .line_tables import (MAX_DEGREE, TABLE_OVERSAMPLE, TAYLOR_TERMS, bessel_poly, fejer_at, fejer_table,
+                          kernel_table, line_tables, numba, order_for, table_at)
 
-try:  # numba compiles the hot loop; without it nothing here runs (a clear error, at first use)
-    import numba
-except ImportError:  # pragma: no cover - numba is a dependency
-    numba = None
-
-TABLE_OVERSAMPLE = 8  # kernel table points per FFT bin
-TAYLOR_TERMS = 4  # Taylor steps between table points (|N d| <= 0.048 rad: error < 1e-8)
-MAX_DEGREE = 40  # polynomial degree of a line's envelope (beta up to ~6 rad)
 IMAGE_TOL = 0.02  # lines weaker than this (x sum Gamma) drop their image (below ~5e-5 of the line there)
-FEJER_POINTS = 16384  # table of |F_K|^2 over one period (interpolation error ~1e-5)
 N_SUMS = 15  # quantities per bin, see SUM_NAMES
 SUM_NAMES = ("Tp", "Tm", "Dl", "P", "P2", "Pw", "Q", "Qw", "U", "Uw", "V", "Vw", "SF", "SFw", "C0")
 """Per bin: Tp, Tm the unit steady tone (sum(Gamma) / 2 K_0) at the line and at its
@@ -70,72 +59,6 @@ P = sum |c_n|^2, P2 = sum |c_n|^4, Pw = sum F_n |c_n|^2 over the random lines;
 Q = sum c_n c_{-n} (and Qw weighted); U = sum_D conj(S_D c_{-D}), V = sum_D conj(S_D) c_D
 (and weighted); SF = sum_{D != 0} |S_D|^2 over pairs of random lines (SFw weighted);
 C0 the engines' carrier lines with their images. Weights F = |F_K(D.w T_r)|^2."""
-
-
-@functools.lru_cache(maxsize=4)
-def kernel_table(n_samples: int, fft_points: int, degree: int) -> np.ndarray:
-    """K_r(theta_j) = sum_s (s / N)^r e^{i theta_j s}, theta_j = 2 pi j / (fft_points x
-    TABLE_OVERSAMPLE), for r = 0 .. degree: (points, degree + 1) complex128."""
-    n_t = fft_points * TABLE_OVERSAMPLE
-    u = np.arange(n_samples) / n_samples
-    seq = np.zeros((degree + 1, n_t))
-    seq[:, :n_samples] = u[None, :] ** np.arange(degree + 1)[:, None]
-    return np.ascontiguousarray((np.fft.ifft(seq, axis=1) * n_t).T)
-
-
-@functools.lru_cache(maxsize=8)
-def line_vectors(order: int) -> np.ndarray:
-    """Integer vectors n (L, 4) with 1 <= sum |n_j| <= order, the zero vector excluded."""
-    r = np.arange(-order, order + 1)
-    grid = np.stack(np.meshgrid(r, r, r, r, indexing="ij"), -1).reshape(-1, 4)
-    l1 = np.abs(grid).sum(1)
-    keep = (l1 >= 1) & (l1 <= order)
-    g = grid[keep]
-    return g[np.lexsort((g[:, 3], g[:, 2], g[:, 1], g[:, 0], np.abs(g).sum(1)))].astype(np.int64)
-
-
-def order_for(beta_max: float, tol: float = 1e-6) -> int:
-    """The smallest line order whose Bessel factor |J_n(beta_max)| drops below tol."""
-    from scipy.special import jv
-
-    for n in range(1, 40):
-        if abs(jv(n, beta_max)) < tol and n > beta_max:
-            return n
-    return 40
-
-
-class LineTables:
-    """Static tables for :func:`line_sums`: the line vectors of one order, their
-    negatives and the dense code of index differences (one code space per engine)."""
-
-    def __init__(self, order: int):
-        self.order = int(order)
-        self.vectors = line_vectors(self.order)
-        self.base = 4 * self.order + 1
-        off = 2 * self.order
-        powers = self.base ** np.arange(4)
-        self.codes = ((self.vectors + off) * powers).sum(1).astype(np.int64)
-        self.line_of_code = np.full(self.base ** 4, -1, np.int64)
-        self.line_of_code[self.codes] = np.arange(len(self.vectors))
-        neg_codes = ((-self.vectors + off) * powers).sum(1)
-        self.neg = self.line_of_code[neg_codes].astype(np.int64)
-        self.powers = powers.astype(np.int64)
-
-
-def _bessel_poly_py(beta, nmax, degree):  # pragma: no cover - compiled below
-    """Coefficients (nmax + 1, degree + 1) of J_m(beta u) as polynomials in u."""
-    out = np.zeros((nmax + 1, degree + 1))
-    for m in range(nmax + 1):
-        s = 0
-        while 2 * s + m <= degree:
-            p = 2 * s + m
-            lg = p * math.log(beta / 2.0) - math.lgamma(s + 1) - math.lgamma(s + m + 1) if beta > 0 else 0.0
-            if beta > 0:
-                out[m, p] = (-1.0) ** s * math.exp(lg)
-            elif p == 0:
-                out[m, p] = 1.0
-            s += 1
-    return out
 
 
 def _line_sums_py(gam, amp, freq, beta_scale, carrier_bin, centres, offsets, table, vectors, neg, codes_pow,
@@ -175,7 +98,7 @@ def _line_sums_py(gam, amp, freq, beta_scale, carrier_bin, centres, offsets, tab
         for k in range(n_e):
             for j in range(4):
                 beta = beta_scale[0] * abs(amp[w, k, j])
-                jc[k, j] = _bessel_poly(beta, order, degree)
+                jc[k, j] = bessel_poly(beta, order, degree)
                 for m in range(order + 1):
                     tot = 0.0
                     for p in range(degree + 1):
@@ -259,7 +182,7 @@ def _line_sums_py(gam, amp, freq, beta_scale, carrier_bin, centres, offsets, tab
         kappa /= gsum
         fej = np.empty(n_act)
         for a in range(n_act):
-            fej[a] = _fejer_at(ftab, act_w[a] * ramp_rad)
+            fej[a] = fejer_at(ftab, act_w[a] * ramp_rad)
         c = np.zeros((n_act, n_b), np.complex128)
         er = np.zeros(n_r, np.complex128)
         sig = np.empty(n_act, np.int64)
@@ -311,16 +234,16 @@ def _line_sums_py(gam, amp, freq, beta_scale, carrier_bin, centres, offsets, tab
                 pos = centre + offsets[b]
                 jp = ((carrier_bin[w] - pos) * TABLE_OVERSAMPLE)
                 jm = ((-carrier_bin[w] - pos) * TABLE_OVERSAMPLE)
-                kp = _table_at(table, jp, 0, n_samples)
-                km = _table_at(table, jm, 0, n_samples)
+                kp = table_at(table, jp, 0, n_samples)
+                km = table_at(table, jm, 0, n_samples)
                 tp = 0.5 * gsum * kp
                 tm = 0.5 * gsum * km
                 c0 = 0.0 + 0.0j
                 for k in range(n_e):
                     for p in range(degree + 1):
                         if c0poly[k, p] != 0.0:
-                            c0 += 0.5 * gam[w, k] * c0poly[k, p] * (_table_at(table, jp, p, n_samples)
-                                                                     + _table_at(table, jm, p, n_samples))
+                            c0 += 0.5 * gam[w, k] * c0poly[k, p] * (table_at(table, jp, p, n_samples)
+                                                                     + table_at(table, jm, p, n_samples))
                 out[w, m, b, 0] = tp
                 out[w, m, b, 1] = tm
                 out[w, m, b, 2] = c0 - kappa * (tp + tm)
@@ -369,7 +292,7 @@ def _line_sums_py(gam, amp, freq, beta_scale, carrier_bin, centres, offsets, tab
                                 if acc[code] == 0.0:
                                     touched[n_touch] = code
                                     n_touch += 1
-                                    acc_w[code] = _fejer_at(ftab, (act_w[a] - act_w[bb]) * ramp_rad)
+                                    acc_w[code] = fejer_at(ftab, (act_w[a] - act_w[bb]) * ramp_rad)
                                 acc[code] += c[a, b] * np.conj(c[bb, b])
                         for t in range(n_touch):
                             code = touched[t]
@@ -402,7 +325,7 @@ def _line_sums_py(gam, amp, freq, beta_scale, carrier_bin, centres, offsets, tab
                                     continue
                                 pb = c[bb, b].real ** 2 + c[bb, b].imag ** 2
                                 sf += pa * pb
-                                sfw += _fejer_at(ftab, (act_w[a] - act_w[bb]) * ramp_rad) * pa * pb
+                                sfw += fejer_at(ftab, (act_w[a] - act_w[bb]) * ramp_rad) * pa * pb
                 else:
                     # pairs summed incoherently (every D taken as one pair): sum_{a != b} p_a p_b,
                     # its Fejer-weighted part over the significant lines, the rest at the mean
@@ -418,7 +341,7 @@ def _line_sums_py(gam, amp, freq, beta_scale, carrier_bin, centres, offsets, tab
                             bb = sig[ib]
                             pb = c[bb, b].real ** 2 + c[bb, b].imag ** 2
                             sig_pairs += pa * pb
-                            sfw += _fejer_at(ftab, (act_w[a] - act_w[bb]) * ramp_rad) * pa * pb
+                            sfw += fejer_at(ftab, (act_w[a] - act_w[bb]) * ramp_rad) * pa * pb
                     sfw += max(sf - sig_pairs, 0.0) / ramps
                 o = out[w, m, b]
                 o[3] = ptot
@@ -435,39 +358,7 @@ def _line_sums_py(gam, amp, freq, beta_scale, carrier_bin, centres, offsets, tab
     return out
 
 
-def _fejer_at_py(ftab, x):  # pragma: no cover - compiled below
-    """|F_K(x)|^2 from its table over one period (linear interpolation)."""
-    n = ftab.shape[0] - 2
-    u = (x / (2.0 * math.pi)) % 1.0 * n
-    j = int(u)
-    f = u - j
-    return ftab[j] * (1.0 - f) + ftab[j + 1] * f
-
-
-def _table_at_py(table, jf, r, n_samples):  # pragma: no cover - compiled below
-    """K_r at fractional table position jf (Taylor step from the nearest point)."""
-    n_t = table.shape[0]
-    j0 = math.floor(jf + 0.5)
-    d = (jf - j0) * 2.0 * math.pi / n_t * n_samples
-    idx = j0 % n_t
-    v = 0.0 + 0.0j
-    f = 1.0 + 0.0j
-    fact = 1.0
-    top = table.shape[1] - 1
-    for q in range(TAYLOR_TERMS + 1):
-        if r + q > top:
-            break
-        if q > 0:
-            fact *= q
-        v += f / fact * table[idx, r + q]
-        f *= 1j * d
-    return v
-
-
 if numba is not None:
-    _bessel_poly = numba.njit(cache=True)(_bessel_poly_py)
-    _fejer_at = numba.njit(cache=True)(_fejer_at_py)
-    _table_at = numba.njit(cache=True)(_table_at_py)
     _line_sums = numba.njit(cache=True)(_line_sums_py)
 
 
@@ -490,7 +381,7 @@ def line_sums(gam, amp, freq, carrier_bin, centres, offsets, *, ramps: int = 1, 
     beta_scale = np.array([radar.model_k * radar.chirp_duration_s, float(radar.samples_per_chirp)])
     if order is None:
         order = order_for(float(beta_scale[0] * np.abs(amp).max()) if amp.size else 0.0, max(amp_tol, 1e-9))
-    tables = _tables(int(order))
+    tables = line_tables(int(order))
     degree = int(min(MAX_DEGREE, max(8, 2 * order + 10)))
     table = kernel_table(radar.samples_per_chirp, radar.fft_points, degree + TAYLOR_TERMS)
     return _line_sums(np.ascontiguousarray(gam, np.float64), amp, np.ascontiguousarray(freq, np.float64),
@@ -500,20 +391,3 @@ def line_sums(gam, amp, freq, carrier_bin, centres, offsets, *, ramps: int = 1, 
                       fejer_table(int(ramps)), int(ramps), float(radar.ramp_period_s), float(g1), float(amp_tol), float(pair_tol),
                       float(radar.bin_hz), bool(coherent),
                       float(reach_tol) if reach_tol > 0 else 1e-300)
-
-
-@functools.lru_cache(maxsize=8)
-def fejer_table(ramps: int) -> np.ndarray:
-    """|F_K(x)|^2 at x = 2 pi j / FEJER_POINTS, j = 0 .. FEJER_POINTS + 1."""
-    x = 2.0 * np.pi * np.arange(FEJER_POINTS + 2) / FEJER_POINTS
-    if ramps <= 1:
-        return np.ones_like(x)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        v = np.sin(ramps * x / 2) / (ramps * np.sin(x / 2))
-    v[np.abs(np.sin(x / 2)) < 1e-9] = 1.0
-    return v * v
-
-
-@functools.lru_cache(maxsize=8)
-def _tables(order: int) -> LineTables:
-    return LineTables(order)

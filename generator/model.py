@@ -105,9 +105,9 @@ def check_model_inputs(x: np.ndarray, radar: RadarConfig = RadarConfig(), what: 
                          "vibration aliases in the sampled chirp)")
 
 
-def _wrap(phase: np.ndarray) -> np.ndarray:
-    """Reduce float64 phases to [-pi, pi] (error ~|phase| x 3e-16 rad: callers keep
-    |phase| <= PHASE_MAX = 1e9 rad, see :func:`check_model_inputs`)."""
+def wrap_phase(phase: np.ndarray) -> np.ndarray:
+    """The toolkit's one phase wrap: float64 phases reduced to [-pi, pi] (error ~|phase|
+    x 3e-16 rad: callers keep |phase| <= PHASE_MAX = 1e9 rad, see :func:`check_model_inputs`)."""
     return phase - TWO_PI * np.rint(phase * (1.0 / TWO_PI))
 
 
@@ -154,7 +154,7 @@ def if_signal(x, radar: RadarConfig = RadarConfig(), *, r0=None, phase_offsets=N
             raise ValueError(f"carrier_phase: expected finite phases with |phase| <= {PHASE_MAX:g} rad, got "
                              f"{cp[~(np.abs(cp) <= PHASE_MAX)][0]!r}")
         carrier = carrier + cp[:, None]
-    carrier = _wrap(carrier).astype(dt)  # (N, Ns), reduced in float64
+    carrier = wrap_phase(carrier).astype(dt)  # (N, Ns), reduced in float64
     amp, w, phi = vibration_terms(x)
     if phase_offsets is not None:
         phi = phi + phase_offsets
@@ -163,7 +163,7 @@ def if_signal(x, radar: RadarConfig = RadarConfig(), *, r0=None, phase_offsets=N
     bracket_t = t if bracket_time is None else np.full_like(t, float(bracket_time))
     # w t + phi for every term as one (N*E*4, 2) @ (2, Ns) product: far faster than
     # a broadcast; phases wrapped first so float32 keeps its resolution.
-    coef = np.stack([w.ravel(), _wrap(phi).ravel()], axis=1).astype(dt)
+    coef = np.stack([w.ravel(), wrap_phase(phi).ravel()], axis=1).astype(dt)
     arg = (coef @ np.stack([t, np.ones_like(t)]).astype(dt)).reshape(*w.shape, -1)
     # displacement d(t) = sum_j A_j cos(w_j t + phi_j): (N, E, Ns)
     disp = np.einsum("nej,nejs->nes", amp.astype(dt), np.cos(arg, out=arg))

@@ -37,6 +37,11 @@ class SpecimenSpread:
             if not (isinstance(v, (int, float, np.number)) and np.isfinite(v) and v >= 0):
                 raise ValueError(f"SpecimenSpread.{f.name} must be a finite number >= 0, got {v!r}")
 
+    @classmethod
+    def exact(cls) -> "SpecimenSpread":
+        """No spread at all: every specimen is the vector itself."""
+        return cls(speed=0.0, frequency=0.0, amplitude=0.0, gamma=0.0, skew=0.0, width=0.0)
+
     def replace(self, **kw) -> "SpecimenSpread":
         return dataclasses.replace(self, **kw)
 

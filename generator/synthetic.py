@@ -34,10 +34,11 @@ import numpy as np
 import scipy.fft
 
 from ..radar import RadarConfig
-from .acquisition import Acquisition, AcquisitionDraws, noise_sigma, phase_columns, yaw_mix
+from ..radar.seeds import rng as as_generator
+from .acquisition import (Acquisition, AcquisitionDraws, frame_phases, noise_sigma, phase_columns, residual_offsets,
+                          yaw_mix)
+from .model import wrap_phase
 from .params import IDX, N_PARAMS, validate_vectors
-
-TWO_PI = 2.0 * np.pi
 
 
 class SyntheticDraws:
@@ -56,7 +57,7 @@ class SyntheticDraws:
             raise ValueError(f"n_acquisitions must be >= 2 (a spread needs two), got {n_acquisitions}")
         self.acq, self.E, self.radar, self.dtype = acq, int(n_engines), radar, np.dtype(dtype)
         self.O, self.I = int(n_acquisitions), int(min(acq.ramps, max(1, ramps_drawn)))
-        rng = np.random.default_rng(seed)
+        rng = as_generator(seed)
         o, e = self.O, self.E
         half = radar.slice_length // 2
         self.centre = int(round(radar.model_range_to_bin(radar.model_range_m)))
@@ -68,18 +69,16 @@ class SyntheticDraws:
         self.t = np.arange(radar.samples_per_chirp) / radar.sample_rate_hz
         # unit draws, in the order of draw_acquisitions (yaw, phases, range, carrier, noise, residual)
         self.yaw = np.radians(rng.uniform(-acq.yaw_deg, acq.yaw_deg, o)) if acq.yaw_deg else np.zeros(o)
-        if acq.phases == "uniform":
-            self.phases = rng.uniform(-np.pi, np.pi, (o, e, 4))
-        else:
-            self.phases = None  # the vectors' own phases
+        # uniform: the phase rule's draws; fixed: None, the vectors' own phases
+        self.phases = frame_phases(np.zeros((o, e * N_PARAMS)), 1, "uniform", rng)[:, 0] \
+            if acq.phases == "uniform" else None
         rng.uniform(size=o)  # (the sub-bin position is each measurement's offset parameter, not drawn)
         self.r0 = np.full(o, radar.model_range_m)
         self.carrier_u = rng.uniform(size=o)  # unused (the amplitude is a parameter); keeps streams aligned
         self.carrier_phase = rng.uniform(-np.pi, np.pi, o)
         self.noise_u = rng.uniform(size=o)
         if acq.mti_depth:
-            self.residual_offset = (rng.uniform(-np.pi, np.pi, (o, e, 4)) if acq.phases == "uniform"
-                                    else np.zeros((o, e, 4)))
+            self.residual_offset = residual_offsets((o, e, 4), acq.phases, rng)
             self.residual_r0 = self.r0 + acq.drift_bins * rng.standard_normal(o) * radar.model_range_per_bin()
             self.residual_phase = rng.uniform(-np.pi, np.pi, o)
         noise = rng.standard_normal((o, self.I, radar.samples_per_chirp))
@@ -145,7 +144,7 @@ class SyntheticDraws:
             coef = np.moveaxis(coef.astype(self.dtype), 3, 1).reshape(w_n, e, o * self.I, 8)
             disp = np.matmul(coef, trig)  # (W, E, O I, N_s)
             base = k * r0[:, None] * self.t + carrier[:, None]  # (O, Ns) float64
-            base = (base - TWO_PI * np.rint(base / TWO_PI)).astype(self.dtype)
+            base = wrap_phase(base).astype(self.dtype)
             total = np.repeat(base, self.I, axis=0)[None, None] + kt * disp
             np.cos(total, out=total)
             g = np.moveaxis(np.repeat(gam.astype(self.dtype), self.I, axis=1), 2, 1)  # (W, E, O I)

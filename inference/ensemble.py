@@ -31,13 +31,13 @@ through emcee's HDF5 backend.
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import io
 import time
 from pathlib import Path
 
 import numpy as np
 
+from ..radar.keys import cache_key
 from .priors import wrap
 from .samplers import CalibrationInterrupted, SamplerRun, stop_on_sigint
 
@@ -61,10 +61,7 @@ def store_interval(settings, n_walkers: int, dim: int) -> int:
 
 
 def fingerprint(*arrays, text: str = "") -> str:
-    h = hashlib.sha256(text.encode())
-    for a in arrays:
-        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
-    return h.hexdigest()[:32]
+    return cache_key(text=text, arrays=arrays, dtype=np.float64, length=32)
 
 
 def estimate_tau(chain: np.ndarray, phase_cols=(), discard: float = 1 / 3) -> np.ndarray:

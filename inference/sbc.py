@@ -4,7 +4,7 @@ likelihood's own model.
 
 Each replicate: a truth drawn from the calibration's prior (the drone's physics);
 ``n_measurements`` acquisitions of it rendered through the scene simulator and the
-radar chain (:func:`mdaug.generator.chain_path.render_through_chain`: random phases
+radar chain (:func:`mdaug.generator.chain.render_through_chain`: random phases
 per frame, K ramps, yaw, body return, range, azimuth, hover drift, clutter, noise,
 ADC, MTI); a full calibration (fit + sampler) under the matching
 :class:`~mdaug.generator.acquisition.Acquisition`; the rank of the truth among
@@ -58,7 +58,7 @@ def sbc_quantities(x: np.ndarray) -> tuple[np.ndarray, list[str]]:
 def simulate_measurements(truth: np.ndarray, n_measurements: int, acquisition: Acquisition, seed,
                           scene=None, radar: RadarConfig = RadarConfig()) -> np.ndarray:
     """n_measurements profiles (n, L) of one drone (13E,) through the scene simulator and
-    the chain, the scene (default :class:`~mdaug.generator.scene.SceneConfig`) taking
+    the chain, the scene (default :class:`~mdaug.generator.chain.SceneConfig`) taking
     its ramps, phases, yaw and body return from the acquisition."""
     from ..generator.augment import Renderer
 

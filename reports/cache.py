@@ -6,17 +6,16 @@ key loads it instead of recomputing, a changed key recomputes.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import time
 from pathlib import Path
 
 from ..radar import atomic_write
+from ..radar.keys import cache_key
 
 
 def settings_key(*parts) -> str:
-    blob = json.dumps(parts, sort_keys=True, default=str)
-    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+    return cache_key(parts)
 
 
 class StageCache:

@@ -28,8 +28,7 @@ def _timed(fn, repeat: int = 3):
 
 def stage_speed(acquisition, quick: bool = False) -> dict:
     from ..generator import SigmaPAugmenter, load_reference, profiles
-    from ..generator.chain_path import render_through_chain
-    from ..generator.scene import SceneConfig
+    from ..generator.chain import SceneConfig, render_through_chain
     from ..generator.synthetic import SyntheticDraws
 
     rows = []

@@ -32,7 +32,6 @@ training runs, paired differences) and every verdict is made (:mod:`.verdicts`).
 """
 from __future__ import annotations
 
-import dataclasses
 import json
 import time
 from pathlib import Path
@@ -131,12 +130,12 @@ class Study(TrainingStages):
         return sets, acq
 
     def _simulated_sets(self):
-        from ..generator.scene import SceneConfig, scene_acquisition, simulate_campaign
+        from ..generator.chain import SceneConfig, simulate_campaign
+        from ..generator.specimens import SpecimenSpread
 
         sim = self.cfg.simulation
         scene = SceneConfig(n_ramps=sim.ramps)
-        reference = dataclasses.replace(scene, **{f.name: 0.0 for f in dataclasses.fields(SceneConfig)
-                                                  if "spread" in f.name})
+        reference = scene.replace(specimens=SpecimenSpread.exact())
         sets, select, new, large = {}, {}, {}, {}
         for cls in self.cfg.classes:
             camp = simulate_campaign(cls, 1, sim.n_calibration + sim.n_select, _stage_seed(self.cfg, "reference", cls),
@@ -157,7 +156,7 @@ class Study(TrainingStages):
         sets["select"], sets["new"] = cat(select), cat(new)
         if large:
             sets["new_large"] = cat(large)
-        return sets, scene_acquisition(scene)
+        return sets, scene.acquisition_for()
 
     def load_set(self, name: str):
         ps = load_profiles(self.out / "data" / f"{name}.npz")

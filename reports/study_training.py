@@ -75,8 +75,7 @@ class TrainingStages:
         (None: in this process). Predictions only; scored and chosen (on the selection
         set) with everything else."""
         from ..generator import load_reference
-        from ..generator.chain_path import render_through_chain
-        from ..generator.scene import SceneConfig, draw_specimens
+        from ..generator.chain import SceneConfig, draw_specimens, render_through_chain
 
         sim, p = self.cfg.simulation, self.cfg.protocol
         classes = sorted(self.cfg.classes)

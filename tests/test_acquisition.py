@@ -125,8 +125,7 @@ def test_one_augmenter_interface_and_mixtures():
 
 
 def test_chain_path_renderer_is_the_chain():
-    from mdaug.generator.chain_path import render_through_chain
-    from mdaug.generator.scene import SceneConfig
+    from mdaug.generator.chain import SceneConfig, render_through_chain
 
     r = Renderer(Acquisition.measured(4), through_chain=True, scene=SceneConfig(snr_db=None, quantise=False))
     got = r.render(np.repeat(HELI[None], 3, 0), np.random.default_rng(2))
@@ -140,7 +139,7 @@ def test_fast_path_matches_the_chain_in_distribution():
     """The fast path (with its MTI residual model) against the literal scene + chain, HELI
     reference at K = 32: mean profile within 0.025 of the peak near the target, spread
     within 30%."""
-    from mdaug.generator.scene import SceneConfig, simulate_campaign
+    from mdaug.generator.chain import SceneConfig, simulate_campaign
     from mdaug.radar import normalise
 
     camp = simulate_campaign("HELI", 1, 60, 2, scene=SceneConfig(n_ramps=32, specimen_spread=0.0))

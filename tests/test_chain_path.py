@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 from mdaug.generator import load_reference
-from mdaug.generator.chain_path import ChainProfiles, render_through_chain
-from mdaug.generator.scene import SceneConfig
+from mdaug.generator.chain import ChainProfiles, SceneConfig, render_through_chain
 from mdaug.radar import RadarConfig
 from mdaug.radar.chain import ChainConfig
 

@@ -7,7 +7,8 @@ from scipy.special import jv
 
 from mdaug.generator import Acquisition, load_reference, render, vibration_terms
 from mdaug.generator.acquisition import draw_acquisitions, render_spectra
-from mdaug.generator.line_moments import line_sums, line_vectors
+from mdaug.generator.line_moments import line_sums
+from mdaug.generator.line_tables import line_vectors
 from mdaug.generator.magnitude import magnitude_moments
 from mdaug.generator.model import spectra
 from mdaug.inference.closed_form import ClosedFormLikelihood

@@ -235,7 +235,7 @@ def test_recovery_of_the_lines_from_five_scene_acquisitions():
     simulator and the chain at K = 32; the 90% intervals of the four line frequencies
     (sorted, label-free) hold the truth."""
     from mdaug.generator.acquisition import Acquisition
-    from mdaug.generator.scene import SceneConfig, simulate_campaign
+    from mdaug.generator.chain import SceneConfig, simulate_campaign
     from mdaug.inference.priors import engine_lines
 
     camp = simulate_campaign("HELI", 1, 5, 11, scene=SceneConfig(n_ramps=32, specimen_spread=0.0))

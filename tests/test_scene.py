@@ -6,8 +6,9 @@ import pytest
 
 from mdaug import cli
 from mdaug.generator import IDX, N_PARAMS, load_reference, profiles
-from mdaug.generator.scene import (Campaign, SceneConfig, as_profile_set, draw_acquisitions, draw_specimens,
-                                   load_campaign, render_cubes, simulate_campaign, yaw_mix)
+from mdaug.generator.acquisition import yaw_mix
+from mdaug.generator.chain import (Campaign, SceneConfig, as_profile_set, draw_acquisitions, draw_specimens,
+                                   load_campaign, render_cubes, simulate_campaign)
 from mdaug.radar import RadarConfig, load_profiles
 from mdaug.radar.chain import angle_spacing_deg
 

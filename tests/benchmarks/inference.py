@@ -107,7 +107,7 @@ OPTIONS = {"ramps": 32, "sbc_draws": 20, "sbc_ramps": 32, "time_budget": 3600.0,
 
 
 def scene_profiles(cls, ramps, n=5, seed=11):
-    from mdaug.generator.scene import SceneConfig, simulate_campaign
+    from mdaug.generator.chain import SceneConfig, simulate_campaign
 
     return simulate_campaign(cls, 1, n, seed, scene=SceneConfig(n_ramps=ramps, specimen_spread=0.0)).profiles
 

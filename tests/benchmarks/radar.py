@@ -53,7 +53,7 @@ def section_chain(args) -> None:
     import scipy.fft
 
     from mdaug.generator import load_reference
-    from mdaug.generator.scene import SceneConfig, draw_acquisitions, draw_specimens, render_cubes
+    from mdaug.generator.chain import SceneConfig, draw_acquisitions, draw_specimens, render_cubes
     from mdaug.radar import RadarConfig
     from mdaug.radar.chain import ChainConfig, process_cube
 
@@ -93,7 +93,7 @@ def section_chain(args) -> None:
 def section_campaign(args) -> None:
     import numpy as np
 
-    from mdaug.generator.scene import SceneConfig, simulate_campaign
+    from mdaug.generator.chain import SceneConfig, simulate_campaign
 
     k_def = SceneConfig().n_ramps
     times = []
@@ -133,8 +133,7 @@ def section_chain_path(args) -> None:
     import numpy as np
 
     from mdaug.generator import load_reference
-    from mdaug.generator.chain_path import render_through_chain
-    from mdaug.generator.scene import SceneConfig
+    from mdaug.generator.chain import SceneConfig, render_through_chain
 
     print(f"\n== chain path: class vector -> raw acquisition -> chain, one profile each; threads={args.threads}; "
           "ms/profile median of 3")
