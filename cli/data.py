@@ -8,7 +8,7 @@ from .common import (BYTES_SPECTRUM, CHAIN_ANTENNAS, DTYPES, SAMPLES, SECONDS_SC
                      chain_from_args, check_size, class_list, finite_float, float_pair, info, nonneg_float, nonneg_int,
                      nothing_written, positive_int, result, seed_int)
 
-SCENE_PHASES = ("fixed", "uniform")  # checked against mdaug.generator.scene.SCENE_PHASES in tests
+SCENE_PHASES = ("fixed", "uniform")  # checked against mdaug.generator.chain.SCENE_PHASES in tests
 
 
 def _pair(v) -> str:
@@ -37,7 +37,7 @@ def check_simulate_sizes(args, frames: int) -> None:
     n_classes = len(args.class_name)
     acq = ("--acquisitions", args.acquisitions, 100)
     ramps, frm = ("--ramps", args.ramps, 32), ("--frames", frames, 11)
-    chunk = min(args.acquisitions, 8)  # acquisitions rendered together (generator.scene.CHUNK_ACQ)
+    chunk = min(args.acquisitions, 8)  # acquisitions rendered together (generator.chain.CHUNK_ACQ)
     check_size(ramps, frm, bytes_each=chunk * CHAIN_ANTENNAS * SAMPLES * 8 * 2, what="ramp frames in memory at once")
     check_size(("--n-angle", args.n_angle, 64), frm, bytes_each=chunk * BYTES_SPECTRUM, what="angle-range images")
     if args.keep_cubes:

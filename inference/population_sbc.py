@@ -3,7 +3,7 @@
 Each replicate: spreads drawn from the hyperprior; ``n_drones + 1`` drones of the
 class drawn around its reference by the scene simulator's specimen model with those
 spreads, ``n_acquisitions`` acquisitions of each through the scene simulator and
-the radar chain (:func:`~mdaug.generator.scene.simulate_campaign`); the first
+the radar chain (:func:`~mdaug.generator.chain.simulate_campaign`); the first
 ``n_drones`` calibrated one by one, then their population
 (:func:`.population_result.calibrate_population`); the last drone is the one not
 seen. Ranks among ``n_rank`` draws of:
@@ -35,15 +35,14 @@ def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n
                          n_acquisitions: int, ramps: int, settings: CalibrationSettings, hyperprior: Hyperprior,
                          n_rank: int) -> dict:
     """One population SBC replicate (module doc): ranks of the spreads and of the unseen drone's lines."""
-    from ..generator.scene import SceneConfig, simulate_campaign
+    from ..generator.chain import SceneConfig, simulate_campaign
+    from ..generator.specimens import SpecimenSpread
     from .calibrate import calibrate
     from .population_result import calibrate_population
 
     truth_ss, data_ss, run_ss, pop_ss, draw_ss = ss.spawn(5)
     spreads = hyperprior.sample(1, np.random.default_rng(truth_ss))[0]
-    s = dict(zip(SPREADS, spreads.tolist()))
-    scene = SceneConfig(n_ramps=ramps, speed_spread=s["speed"], frequency_spread=s["frequency"],
-                        amplitude_spread=s["amplitude"], gamma_spread=s["gamma"], skew_spread=s["skew"])
+    scene = SceneConfig(n_ramps=ramps, specimens=SpecimenSpread(**dict(zip(SPREADS, spreads.tolist()))))
     t0 = time.perf_counter()
     camp = simulate_campaign(ref, n_drones + 1, (n_drones + 1) * n_acquisitions, int(data_ss.generate_state(1)[0]),
                              scene=scene)

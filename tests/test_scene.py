@@ -1,4 +1,4 @@
-"""The measurement-scene simulator (generator/scene.py) and ``mdaug simulate``."""
+"""The measurement-scene simulator (generator/chain/) and ``mdaug simulate``."""
 import json
 
 import numpy as np

@@ -34,7 +34,7 @@ def settings_from(args) -> CalibrationSettings:
 
 
 def section_cost(args):
-    from mdaug.generator.scene import SceneConfig, simulate_campaign
+    from mdaug.generator.chain import SceneConfig, simulate_campaign
     from mdaug.inference.calibrate import calibrate
     from mdaug.inference.population_result import calibrate_population
 

@@ -14,7 +14,7 @@ Ratios are against (a), measured in this run. Target: chain within 2x of its FFT
 Section ``campaign``: simulating + processing a 136-acquisition campaign (44 HELI +
 92 QUAD, default scene). Target: under 30 s.
 
-Section ``chain_path``: :func:`mdaug.generator.chain_path.render_through_chain`, class
+Section ``chain_path``: :func:`mdaug.generator.chain.render_through_chain`, class
 vectors (the HELI and QUAD references) rendered as raw acquisitions and processed by the
 chain, for K = 1, 4, 32 ramps: ms per profile (median of 3; wall clock and, in
 brackets, CPU time of this process: the cores are shared) of the literal path (raw
