@@ -137,8 +137,9 @@ def add_evaluate(sub, parents, help):
 # ---- sweep ------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class SyntheticTrainSet:
-    """Picklable ``make_train(sigma_p, seed) -> (X, y)`` for the sweep: sigma_P sets
-    of ``classes`` under the given acquisition (``n_per_class`` profiles per class)."""
+    """Picklable ``make_train(sigma_p, seed) -> (X, y)`` for the sweep: the registry's
+    sigma_p_published sets (:mod:`mdaug.strategies`) of ``classes`` under the given
+    acquisition (``n_per_class`` profiles per class)."""
 
     classes: tuple
     n_per_class: int
@@ -153,14 +154,13 @@ class SyntheticTrainSet:
         return json.dumps(asdict(self), sort_keys=True)
 
     def __call__(self, sigma_p: float, seed: int):
-        from ..generator import Acquisition, SigmaPAugmenter, make_dataset
+        from ..strategies import TrainingSpec, training_set
 
-        acq = Acquisition.from_dict(self.acquisition or {})
-        augs = [SigmaPAugmenter(c, sigma_p, sign_policy=self.sign_policy, perturb_phases=self.perturb_phases,
-                                acquisition=acq, normalisation=self.normalisation, dtype=self.dtype)
-                for c in self.classes]
-        ds = make_dataset(augs, self.n_per_class, seed, progress=False)
-        return ds.profiles, ds.labels
+        spec = TrainingSpec("sigma_p_published", sigma_p=sigma_p, normalisation=self.normalisation,
+                            acquisition=self.acquisition or {}, sign_policy=self.sign_policy,
+                            perturb_phases=self.perturb_phases, dtype=self.dtype)
+        X, y, _ = training_set(spec, self.classes, self.n_per_class, seed)
+        return X, y
 
 
 def check_sweep_sizes(args, acq, n_test: int) -> None:
