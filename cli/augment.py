@@ -13,9 +13,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import (SAMPLES, SECONDS_CHAIN_RAMP, SECONDS_FAST_RAMP, SIGN_POLICIES, acquisition_from_args,
-                     acquisition_given, add_acquisition_options, add_verb, check_size, class_list, info, nonneg_float,
-                     positive_int, result, seed_int, unit_fraction, warn)
+from .common import (SAMPLES, SECONDS_CHAIN_RAMP, SECONDS_FAST_RAMP, add_verb, check_size, class_list, info,
+                     nonneg_float, positive_int, result, seed_int, unit_fraction, warn)
+from .options import SIGN_POLICIES, acquisition_from_args, acquisition_given, add_acquisition_options
 
 DEFAULT_CLASSES = ("HELI", "QUAD")
 DEFAULT_SIGMA_P = 0.2

@@ -11,9 +11,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import (BYTES_SPECTRUM, SECONDS_LIKELIHOOD_RAMP, acquisition_from_args, acquisition_given,
-                     add_acquisition_options, add_verb, check_size, count_2, info, positive_float, positive_int, result,
-                     seed_int, warn)
+from .common import (BYTES_SPECTRUM, SECONDS_LIKELIHOOD_RAMP, add_verb, check_size, count_2, info, positive_float,
+                     positive_int, result, seed_int, warn)
+from .options import acquisition_from_args, acquisition_given, add_acquisition_options
 
 EXIT_NOT_CONVERGED = 3
 
