@@ -6,6 +6,7 @@ Subpackages, lowest first (imports only point down):
 - ``mdaug.generator``: the vibration model, f(x), augmenters and the scene simulator;
 - ``mdaug.inference``: likelihood, priors, nlopt fit, emcee posterior;
 - ``mdaug.classify``: classifiers, metrics, the sigma_P protocol, the tsaug baseline;
+- ``mdaug.strategies``: the strategy registry (name -> how its training set is made);
 - ``mdaug.reports``: the study and its report;
 - ``mdaug.cli``: the ``mdaug`` command (one module per group of verbs), on top.
 """

@@ -64,13 +64,13 @@ class ProfileClassifier:
         return float(np.mean(self.predict(X) == np.asarray(y).astype(str)))
 
     # -- checks ----------------------------------------------------------------------
-    def _check_fitted(self) -> None:
+    def check_fitted(self) -> None:
         if self.classes_ is None:
             raise ValueError(f"this {self.name} classifier is not trained yet; call fit() first")
 
     def check_input(self, X, source: str = "profiles") -> np.ndarray:
         """Raise a clear error when X's profile length differs from training."""
-        self._check_fitted()
+        self.check_fitted()
         x = as_profiles(X, what=source)
         if x.shape[1] != self.n_features_in_:
             raise ValueError(f"{source}: profiles have {x.shape[1]} bins but this {self.name} model "
@@ -79,7 +79,7 @@ class ProfileClassifier:
 
     def check_labels(self, y, source: str = "labels") -> np.ndarray:
         """Raise a clear error when y holds labels the model was not trained on."""
-        self._check_fitted()
+        self.check_fitted()
         y = np.asarray(y).astype(str).ravel()
         unknown = sorted(set(y.tolist()) - set(self.classes_.tolist()))
         if unknown:

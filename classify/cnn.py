@@ -41,7 +41,8 @@ import numpy as np
 import torch
 from torch import nn
 from ..radar.progress import progress_bar
-from ..radar.seeds import child_seed
+from ..radar.seeds import child_seed, torch_generator
+from ..radar.seeds import rng as seeded_rng
 from .base import ProfileClassifier
 
 SIDE = 20
@@ -90,7 +91,7 @@ def split_indices(yi: np.ndarray, fractions=(0.8, 0.1, 0.1), groups=None, rng=No
     class with at least 3 items (groups) puts at least one in each split of
     non-zero fraction. Returns three sorted index arrays (train, validation, test).
     """
-    rng = np.random.default_rng(rng)
+    rng = seeded_rng(rng)
     yi = np.asarray(yi)
     groups = np.arange(yi.size) if groups is None else np.asarray(groups)
     if groups.shape != yi.shape:
@@ -137,7 +138,7 @@ class CNNClassifier(ProfileClassifier):
                 "monitor": self.monitor, "fractions": list(self.fractions)}
 
     def build(self, n_classes: int) -> ProfileCNN:
-        g = torch.Generator().manual_seed(child_seed(self.random_state, 3))
+        g = torch_generator(self.random_state, 3)
         net = ProfileCNN(n_classes, hidden=self.hidden)
         with torch.no_grad():  # seeded re-initialisation with torch's default schemes
             for m in net.modules():
@@ -172,7 +173,7 @@ class CNNClassifier(ProfileClassifier):
         tr, va, te = split_indices(yi, self.fractions, groups, child_seed(self.random_state, 4))
         if tr.size == 0 or va.size == 0:
             raise ValueError(f"too few profiles ({yi.size}) for a {self.fractions} split")
-        shuffle = torch.Generator().manual_seed(child_seed(self.random_state, 5))
+        shuffle = torch_generator(self.random_state, 5)
         with torch_threads(self.threads):
             self.net_ = self.build(len(self.classes_))
             opt = torch.optim.Adam(self.net_.parameters(), lr=self.learning_rate)

@@ -110,7 +110,7 @@ class XGBClassifierWrapper(ProfileClassifier):
         return {**super().params(), "n_estimators": self.n_estimators, "max_depth": self.max_depth,
                 "learning_rate": self.learning_rate, "max_bin": self.max_bin, "subsample": self.subsample}
 
-    def _new_estimator(self):
+    def new_estimator(self):
         from xgboost import XGBClassifier
 
         return XGBClassifier(n_estimators=self.n_estimators, max_depth=self.max_depth,
@@ -119,7 +119,7 @@ class XGBClassifierWrapper(ProfileClassifier):
                              random_state=child_seed(self.random_state, 2), verbosity=0)
 
     def _fit(self, X, yi):
-        self.estimator_ = self._new_estimator().fit(X, yi)
+        self.estimator_ = self.new_estimator().fit(X, yi)
 
     def _proba(self, X):
         return self.estimator_.predict_proba(X)

@@ -53,7 +53,7 @@ def save_model(model: ProfileClassifier, path) -> Path:
     """Write a trained classifier to ``path`` (one ZIP, written atomically)."""
     if not isinstance(model, ProfileClassifier):
         raise ValueError(f"save_model expects an mdaug classifier, got {type(model).__name__}")
-    model._check_fitted()
+    model.check_fitted()
     member, blob = _weights(model)
     meta = {"format": FORMAT, "format_version": FORMAT_VERSION, "kind": model.name,
             "params": model.params(), "classes": model.classes_.tolist(),
@@ -120,7 +120,7 @@ def _restore(model: ProfileClassifier, meta: dict, blob: bytes) -> None:
             raise DataFileError(f"types {refused} are not on the trusted list")
         model.estimator_ = sio.loads(blob, trusted=list(untrusted))
     elif model.name == "xgb":
-        est = model._new_estimator()
+        est = model.new_estimator()
         est.load_model(bytearray(blob))
         model.estimator_ = est
     elif model.name == "cnn":

@@ -37,14 +37,43 @@ from .metrics import evaluate
 from .models import make_classifier
 
 PUBLISHED_SIGMA_PS = (0.0, 0.05, 0.10, 0.15, 0.20, 0.25, 0.30, 0.40, 0.50, 0.60)
+"""The published sigma_P grid (the toolkit's one copy)."""
 FAST_MODELS = ("svm", "nb", "xgb")
 METRICS = ("accuracy", "balanced_accuracy", "min_recall")
+TIE = 0.01
+"""Scores within this of the best are tied (the study's choices: mean balanced accuracy)."""
+PREFER = {"sigma_p": "smaller", "width": "larger"}
+"""Which tied setting wins: the smaller sigma_P (the published rule), the larger
+specimen width (the selection set holds only the calibrated drone, which cannot tell
+how much new drones differ: among equals, assume more variation)."""
+
+
+def ties(scores: dict, tie: float = TIE) -> list:
+    """The keys whose score is within ``tie`` of the best (and 1e-12 of float noise),
+    best first (then in the given order); [] when there are no scores."""
+    if not scores:
+        return []
+    top = max(scores.values())
+    return sorted((n for n, s in scores.items() if s >= top - tie - 1e-12), key=lambda n: -scores[n])
+
+
+def choose(scores: dict, prefer: str = "smaller", tie: float = TIE) -> tuple:
+    """(value, tied): the one choice rule of a setting. THE TIE RULE: the values whose
+    score is within ``tie`` of the best are tied (:func:`ties`), and the tie goes to the
+    smallest of them (``prefer="smaller"``) or the largest (``"larger"``). The study
+    chooses on the mean over the fast classifiers with ``tie`` = :data:`TIE`; the
+    sweep's per-classifier pick (:meth:`SweepResult.best`) with ``tie`` = 0 (exact
+    ties to the smaller sigma_P, as published)."""
+    tied = sorted(ties(scores, tie))
+    return (min(tied) if prefer == "smaller" else max(tied)), tied
 
 
 
 @dataclass
 class SweepJob:
-    """One sigma_P point: everything a worker needs (picklable when make_train is)."""
+    """One sigma_P point (or one value of another setting: the study's candidates):
+    everything a worker needs (picklable when make_train is). ``boot_seed``: the
+    bootstrap's seed (None: ``child_seed(train_seed, 7)``)."""
 
     index: int
     sigma_p: float
@@ -55,6 +84,7 @@ class SweepJob:
     models: tuple
     model_params: dict
     n_boot: int
+    boot_seed: int | None = None
 
 
 def run_sweep_job(job: SweepJob, on_cell=None) -> list[dict]:
@@ -69,7 +99,7 @@ def run_sweep_job(job: SweepJob, on_cell=None) -> list[dict]:
             yt = model.check_labels(yt, source=f"test set {test_name}")
             model.check_input(xt, source=f"test set {test_name}")
             m = evaluate(yt, model.predict(xt), labels=model.classes_.tolist(), n_boot=job.n_boot,
-                         random_state=child_seed(job.train_seed, 7))
+                         random_state=child_seed(job.train_seed, 7) if job.boot_seed is None else job.boot_seed)
             recalls = {lab: pc["recall"] for lab, pc in m["per_class"].items() if pc["recall"] is not None}
             ci = m["ci"] or {}
             row = {"sigma_p": job.sigma_p, "model": name, "test_set": test_name,
@@ -85,6 +115,12 @@ def run_sweep_job(job: SweepJob, on_cell=None) -> list[dict]:
         if on_cell is not None:
             on_cell()
     return rows
+
+
+def row_ci(row: dict, metric: str = "balanced") -> list | None:
+    """A row's 95% interval of ``metric`` ("balanced" or "accuracy") as [lo, hi], or None."""
+    lo, hi = row.get(f"{metric}_lo"), row.get(f"{metric}_hi")
+    return None if lo is None else [lo, hi]
 
 
 def _job_key(job: SweepJob) -> str:
@@ -147,14 +183,17 @@ class SweepResult:
         return np.array([np.nan if r.get(name) is None else r[name] for r in sel], dtype=float)
 
     def best(self, model: str, test_set: str, metric: str = "accuracy") -> dict:
-        """The row with the highest ``metric`` (ties: the smaller sigma_P)."""
+        """The row with the highest ``metric`` (:func:`choose` with tie 0: exact ties to
+        the smaller sigma_P)."""
         sel = [r for r in self.rows if r["model"] == model and r["test_set"] == test_set]
         if not sel:
             raise ValueError(f"no rows for model {model!r} and test set {test_set!r} "
                              f"(models {self.models}, test sets {self.test_sets})")
         if metric not in sel[0]:
             raise ValueError(f"unknown metric {metric!r}; columns: {self.columns}")
-        return max(sel, key=lambda r: (r[metric], -r["sigma_p"]))
+        by_value = {r["sigma_p"]: r for r in reversed(sel)}  # a repeated sigma_P: its first row
+        value, _ = choose({v: r[metric] for v, r in by_value.items()}, PREFER["sigma_p"], tie=0.0)
+        return by_value[value]
 
     def to_csv(self, path) -> Path:
         from ..radar import atomic_write

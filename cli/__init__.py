@@ -25,7 +25,7 @@ import sys
 
 from .common import HelpFormatter, Parser, UsageError, global_options
 
-GROUPS = ("data", "augment", "calibrate", "classify", "study")
+GROUPS = ("data", "augment", "calibrate", "classify", "sweep", "study")
 ORDER = ("simulate", "process", "calibrate", "augment", "train", "evaluate", "sweep", "baseline", "run")
 """Verbs in the order ``mdaug --help`` lists them."""
 

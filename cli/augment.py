@@ -13,9 +13,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import (SAMPLES, SECONDS_CHAIN_RAMP, SECONDS_FAST_RAMP, SIGN_POLICIES, acquisition_from_args,
-                     acquisition_given, add_acquisition_options, add_verb, check_size, class_list, info, nonneg_float,
-                     positive_int, result, seed_int, unit_fraction, warn)
+from .common import (SAMPLES, SECONDS_CHAIN_RAMP, SECONDS_FAST_RAMP, add_verb, check_size, class_list, info,
+                     nonneg_float, positive_int, result, seed_int, unit_fraction, warn)
+from .options import SIGN_POLICIES, acquisition_from_args, acquisition_given, add_acquisition_options
 
 DEFAULT_CLASSES = ("HELI", "QUAD")
 DEFAULT_SIGMA_P = 0.2
@@ -29,10 +29,12 @@ def posterior_arg(text: str) -> tuple[str, Path]:
 
 
 def augmenters_from_args(args) -> tuple[list, dict | None, list[str]]:
-    """The augmenters the options ask for, the settings they add to the file, and the
-    warnings to print once every check has passed."""
-    from ..generator import Renderer, SigmaPSource, SpecimenSource, SpecimenSpread
-    from ..generator.augment import ModelAugmenter
+    """The augmenters the options ask for (through the strategy registry,
+    :mod:`mdaug.strategies`: ``--classes`` is sigma_p_published, ``--fit`` sigma_p_fit,
+    ``--posterior`` posterior), the settings they add to the file, and the warnings to
+    print once every check has passed."""
+    from ..inference.posterior_augment import load_posterior
+    from ..strategies import STRATEGIES, TrainingSpec, augmenter
 
     fits, posts = args.fit or [], args.posterior or []
     names = [c for c, _ in fits + posts]
@@ -43,41 +45,33 @@ def augmenters_from_args(args) -> tuple[list, dict | None, list[str]]:
     if posts and args.sigma_p is not None and not fits:
         raise ValueError("--sigma-p applies to sigma_P sources (--classes or --fit), not to --posterior")
     sigma_p = DEFAULT_SIGMA_P if args.sigma_p is None else args.sigma_p
-    specimens = None if args.specimen_width is None else SpecimenSpread(width=args.specimen_width)
 
-    def renderer(acq):
-        return Renderer(acq, args.normalisation, args.dtype, through_chain=args.through_chain)
+    def spec(name, perturb):
+        return TrainingSpec(name, sigma_p=sigma_p if STRATEGIES[name].parameter == "sigma_p" else None,
+                            width=args.specimen_width, normalisation=args.normalisation,
+                            through_chain=args.through_chain, sign_policy=args.sign_policy, perturb_phases=perturb,
+                            dtype=args.dtype)
 
-    def finish(source, acq):
-        if specimens is not None:
-            source = SpecimenSource(source, specimens)
-        return ModelAugmenter(source, renderer(acq))
-
-    augs, extra, warnings = [], {}, []
+    augs, warnings = [], []
     if names:
-        from ..inference.posterior_augment import PosteriorSource, load_posterior
-
         for cls, path in fits + posts:
             post = load_posterior(path, cls)
             if not post.converged:
                 warnings.append(f"posterior of {cls} ({path}) did not converge: {post.diagnostics['reason']}")
-            acq, perturb = acquisition_from_args(args, post.measured_acquisition())
-            if (cls, path) in fits:
-                src = SigmaPSource(post.best_fit, sigma_p, sign_policy=args.sign_policy, perturb_phases=perturb,
-                                   label=cls)
-            else:
-                src = PosteriorSource(post, label=cls)
-            augs.append(finish(src, acq))
-        extra = {"strategy": "+".join(sorted({"sigma_p_fit" if f in fits else "posterior" for f in fits + posts})),
+            acq, _ = acquisition_from_args(args, post.measured_acquisition())
+            # sigma_p_fit perturbs the phases only when asked (--phases relative), as in the study
+            s = spec("sigma_p_fit", args.phases == "relative") if (cls, path) in fits else spec("posterior", None)
+            augs.append(augmenter(s, cls, calibration=post, acquisition=acq))
+        extra = {"strategy": "+".join(sorted({STRATEGIES["sigma_p_fit" if f in fits else "posterior"].label
+                                              for f in fits + posts})),
                  "posteriors": {c: str(p) for c, p in fits + posts}}
     else:
         acq, perturb = acquisition_from_args(args)
         classes = list(DEFAULT_CLASSES) if args.classes is None else args.classes
-        augs = [finish(SigmaPSource(c, sigma_p, sign_policy=args.sign_policy, perturb_phases=perturb), acq)
-                for c in classes]
-        extra = {"strategy": "sigma_p"}
-    if specimens is not None:
-        extra["specimens"] = specimens.to_dict()
+        augs = [augmenter(spec("sigma_p_published", perturb), c, acquisition=acq) for c in classes]
+        extra = {"strategy": STRATEGIES["sigma_p_published"].label}
+    if args.specimen_width is not None:
+        extra["specimens"] = augs[0].source.spread.to_dict()
     extra["acquisition_from"] = "options" if acquisition_given(args) else ("calibration" if names else "default")
     return augs, extra, warnings
 

@@ -11,9 +11,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import (BYTES_SPECTRUM, SECONDS_LIKELIHOOD_RAMP, acquisition_from_args, acquisition_given,
-                     add_acquisition_options, add_verb, check_size, count_2, info, positive_float, positive_int, result,
-                     seed_int, warn)
+from .common import (BYTES_SPECTRUM, SECONDS_LIKELIHOOD_RAMP, add_verb, check_size, count_2, info, positive_float,
+                     positive_int, result, seed_int, warn)
+from .options import acquisition_from_args, acquisition_given, add_acquisition_options
 
 EXIT_NOT_CONVERGED = 3
 
@@ -284,7 +284,9 @@ def add_calibrate(sub, parents, help):
                    help="short run of seconds, for a first look (usually not converged)")
     g.add_argument("--sampler", choices=SAMPLERS, default=None,
                    help="emcee: ensemble from the fit, run to 50 tau; smc: tempered SMC from the prior with "
-                        f"mode jumps, for multimodal posteriors, gives the evidence (default: {d.sampler})")
+                        "mode jumps, for multimodal posteriors, gives the evidence; laplace: importance sampling "
+                        "from Gaussians at the fit's modes (seconds; flagged when its weights cannot be trusted) "
+                        f"(default: {d.sampler})")
     g.add_argument("--time-budget", type=positive_float, default=None, metavar="SECONDS",
                    help="stop sampling after this many seconds when not converged before (the run is then "
                         f"flagged not converged; rerun to continue) (default: {d.time_budget:g})")

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .common import (BYTES_SPECTRUM, CHAIN_ANTENNAS, DTYPES, SAMPLES, SECONDS_SCENE_RAMP, add_chain_options, add_verb,
-                     chain_from_args, check_size, class_list, finite_float, float_pair, info, nonneg_float, nonneg_int,
-                     nothing_written, positive_int, result, seed_int)
+from .common import (BYTES_SPECTRUM, CHAIN_ANTENNAS, SAMPLES, SECONDS_SCENE_RAMP, add_verb, check_size, class_list,
+                     finite_float, float_pair, info, nonneg_float, nonneg_int, nothing_written, positive_int, result,
+                     seed_int)
+from .options import DTYPES, add_chain_options, chain_from_args
 
 SCENE_PHASES = ("fixed", "uniform")  # checked against mdaug.generator.chain.SCENE_PHASES in tests
 

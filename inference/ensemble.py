@@ -38,8 +38,9 @@ from pathlib import Path
 import numpy as np
 
 from ..radar.keys import cache_key
+from ..radar.seeds import rng as seeded_rng
 from .priors import wrap
-from .samplers import CalibrationInterrupted, SamplerRun, stop_on_sigint
+from .sampler_run import CalibrationInterrupted, SamplerRun, stop_on_sigint
 
 GROUP = "mcmc"
 DE_MIX = ((0.25, 0.5), (1.0, 0.4), (None, 0.1))  # (factor of the standard gamma or None = 1.0, weight)
@@ -253,7 +254,7 @@ class EmceeSampler:
         ball_ss, mc_ss = seed_seq.spawn(2)
         n_walkers = max(settings.n_walkers or 2 * layout.dim + 2, 2 * layout.dim + 2, 32)  # DE needs > 2 dim
         n_walkers += n_walkers % 2
-        p0, n_modes = start_walkers(post, fit, settings, n_walkers, np.random.default_rng(ball_ss))
+        p0, n_modes = start_walkers(post, fit, settings, n_walkers, seeded_rng(ball_ss))
         run = run_ensemble(post, p0, settings, seed=int(mc_ss.generate_state(1)[0]), backend_path=backend_path,
                            fp=fingerprint, phase_cols=layout.phase_cols,
                            relabel=layout.random_relabel if settings.relabel > 0 and layout.labelled else None)

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..radar.progress import progress_bar
+from ..radar.seeds import rng as seeded_rng
 
 from .likelihood import LogPosterior
 
@@ -70,7 +71,7 @@ class FitResult:
                    algorithm=d["algorithm"], seconds=float(d["seconds"]), notes=list(d.get("notes", [])), **arr)
 
 
-def _run_one(nlopt, algorithm: str, post, lo, hi, u0, budget: int, seed: int, bar=None):
+def run_one(nlopt, algorithm: str, post, lo, hi, u0, budget: int, seed: int, bar=None):
     """One nlopt run on the unit cube; returns (best u, best value, evaluations). ``bar``:
     a progress bar told of every evaluation."""
     d = len(lo)
@@ -125,7 +126,7 @@ def polish_subset(post, v: np.ndarray, cols: np.ndarray, budget: int, seed: int)
             full[:, cols] = u
             return post.fit_objective(full)
 
-    u, _, _ = _run_one(nlopt, "LN_BOBYQA", _Sub(), sub_lo, sub_hi, (v[cols] - sub_lo) / (sub_hi - sub_lo), budget, seed)
+    u, _, _ = run_one(nlopt, "LN_BOBYQA", _Sub(), sub_lo, sub_hi, (v[cols] - sub_lo) / (sub_hi - sub_lo), budget, seed)
     v[cols] = sub_lo + (sub_hi - sub_lo) * u
     return v
 
@@ -160,7 +161,7 @@ def global_fit(post, settings, seed_seq: np.random.SeedSequence, start=None) -> 
     lo, hi = post.fit_bounds()
     width = hi - lo
     coarse = post.coarse()
-    rng = np.random.default_rng(seed_seq)
+    rng = seeded_rng(seed_seq)
     zs, fs, ns = [], [], []
     polish = settings.polish_budget if settings.local_algorithm != "none" else 0
     bar = progress_bar(total=settings.n_starts * (settings.fit_budget + polish) + polish, desc="fit",
@@ -177,14 +178,14 @@ def global_fit(post, settings, seed_seq: np.random.SeedSequence, start=None) -> 
         else:
             u0 = rng.uniform(size=len(lo))
         seed = int(rng.integers(2**31 - 1))
-        u, f, n = _run_one(nlopt, settings.fit_algorithm, coarse, lo, hi, u0, settings.fit_budget, seed, bar)
+        u, f, n = run_one(nlopt, settings.fit_algorithm, coarse, lo, hi, u0, settings.fit_budget, seed, bar)
         if coarse is not post:
             f = float(post.fit_objective((lo + width * u)[None])[0])
         if settings.local_algorithm != "none" and settings.polish_budget > 0:
             # polish the global result; the first start also polishes its initial point
             # (the reference) directly, which a population method may have left behind
             for u_from in ([u, u0] if s == 0 and start is not None else [u]):
-                u2, f2, n2 = _run_one(nlopt, settings.local_algorithm, post, lo, hi, u_from,
+                u2, f2, n2 = run_one(nlopt, settings.local_algorithm, post, lo, hi, u_from,
                                       settings.polish_budget, seed, bar)
                 n += n2
                 if f2 < f:

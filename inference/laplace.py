@@ -29,7 +29,7 @@ import time
 
 import numpy as np
 
-from .samplers import SamplerRun
+from .sampler_run import SamplerRun
 
 NU = 5.0  # Student-t degrees of freedom of the proposal
 INFLATE = 1.5  # proposal sd / Laplace sd

@@ -208,7 +208,7 @@ class ModeFinder:
         """Local optima (n, dim) reached from thetas (n, dim) and the evaluations used."""
         import nlopt
 
-        from .fit import _run_one
+        from .fit import run_one
 
         post = self.post
         lo, hi = post.fit_bounds()
@@ -216,7 +216,7 @@ class ModeFinder:
         out, evals = [], 0
         for th in np.atleast_2d(thetas):
             u0 = np.clip((th[:d] - lo) / (hi - lo), 0.0, 1.0)
-            u, _, n = _run_one(nlopt, "LN_BOBYQA", post, lo, hi, u0, self.polish_budget,
+            u, _, n = run_one(nlopt, "LN_BOBYQA", post, lo, hi, u0, self.polish_budget,
                                int(rng.integers(2**31 - 1)))
             v = post.canonical_fit((lo + (hi - lo) * u)[None])
             out.append(post.theta_from_fit(v)[0])

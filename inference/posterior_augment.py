@@ -13,13 +13,15 @@ and the acquisition that renders the vectors draws them.
 The vectors are rendered by a :class:`~mdaug.generator.augment.Renderer` under an
 acquisition: by default the one the posterior was calibrated under, with the
 carrier-return and noise-floor ranges the calibration measured
-(:meth:`CalibrationResult.measured_acquisition`).
+(:meth:`CalibrationResult.measured_acquisition`). The training-set strategies that
+use these sources (sigma_P around the best fit, posterior draws, ...) are rows of the
+registry :mod:`mdaug.strategies`.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..generator.augment import ModelAugmenter, Renderer, SigmaPSource, SpecimenSource, VectorSource
+from ..generator.augment import ModelAugmenter, Renderer, SpecimenSource, VectorSource
 from ..generator.params import NONNEGATIVE, N_PARAMS, PHASES
 from ..generator.specimens import SpecimenSpread
 from ..radar import RadarConfig
@@ -96,22 +98,3 @@ class PosteriorAugmenter(ModelAugmenter):
     def settings(self) -> dict:
         return {**super().settings(), "strategy": "posterior" if not isinstance(self.source, SpecimenSource)
                 else "posterior+specimens"}
-
-
-class FitSigmaPAugmenter(ModelAugmenter):
-    """The published method done with the calibration: sigma_P around the calibrated
-    best fit (not the packaged reference), rendered under the calibration's
-    acquisition (default) with its measured carrier and noise ranges."""
-
-    def __init__(self, posterior, sigma_p: float = 0.2, *, label: str | None = None, acquisition=None,
-                 sign_policy: str = "reflect", normalisation: str = "peak", radar: RadarConfig = RadarConfig(),
-                 dtype: str = "float32", through_chain: bool = False, scene=None, random_state=None):
-        post = load_posterior(posterior, label)
-        src = SigmaPSource(post.best_fit, sigma_p, sign_policy=sign_policy, label=(label or post.class_name).upper())
-        super().__init__(src, _renderer(post, acquisition, normalisation=normalisation, dtype=dtype, radar=radar,
-                                        through_chain=through_chain, scene=scene), random_state=random_state)
-        self.posterior = post
-
-    def settings(self) -> dict:
-        return {**super().settings(), "strategy": "sigma_p_fit",
-                "posterior_converged": bool(self.posterior.converged)}

@@ -38,27 +38,6 @@ META_FIELDS = ("class_name", "n_engines", "n_measurements", "priors", "diagnosti
 """Fields of the posterior attribute ``mdaug`` every reader needs."""
 IDENTIFIED_RATIO = 0.5  # posterior sd / prior sd above this: "stays near its prior"
 
-_UNITS = {**{f"A_{r}": (f"A_{r} (mm)", 1e3) for r in "abpm"},
-          **{f"w_{r}": (f"f_{r} (Hz)", 1 / (2 * np.pi)) for r in "ab"},
-          **{f"C_{r}": (f"C_{r} (ratio)", 1.0) for r in "pm"},
-          **{f"phi_{r}": (f"phi_{r} (rad)", 1.0) for r in "abpm"},
-          "Gamma": ("Gamma (rel.)", 1.0), "lnG": ("lnG = ln(Gamma/Gamma_0)", 1.0),
-          "offset": ("offset (bins)", 1.0), "carrier": ("carrier (x sum Gamma)", 1.0),
-          "noise_db": ("noise floor (dB)", 1.0), "lnsigma": ("ln sigma (noise)", 1.0)}
-"""Plot labels with units and the factor from the stored unit (m, rad/s) to the shown one."""
-
-
-SUMMARY_UNITS = {"Gamma": "rel.", "A": "m", "w": "rad/s", "C": "ratio", "phi": "rad", "offset": "bins",
-                 "carrier": "x sum Gamma", "noise_db": "dB", "sigma": "peak = 1"}
-"""Units of the summary table's rows (the stored units: metres, rad/s)."""
-
-
-def summary_unit(row: str) -> str:
-    """The unit of a summary row name such as ``A_a[0]``, ``phi_b[0]@1`` or ``noise_db@2``."""
-    base = row.split("[")[0].split("@")[0]
-    return SUMMARY_UNITS.get(base, SUMMARY_UNITS.get(base.split("_")[0], ""))
-
-
 def import_arviz():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)
@@ -304,52 +283,15 @@ class CalibrationResult:
         return pd.DataFrame.from_dict(rows, orient="index")
 
     def report(self) -> str:
-        """Human-readable fit, convergence and posterior summary."""
-        import pandas as pd
+        """Human-readable fit, convergence and posterior summary (:func:`.result_report.report`)."""
+        from .result_report import report
 
-        d, f = self.diagnostics, self.fit
-        lines = [f"class {self.class_name}: {self.n_engines} engine(s), {self.n_measurements} measurement(s), "
-                 f"{self.n_draws} posterior draws",
-                 f"acquisition: {self.acquisition.describe()}; "
-                 + (f"phases marginalised ({self.meta.get('likelihood', {}).get('likelihood', 'marginal')})"
-                    if self.marginal else "phases fitted"),
-                 f"fit ({f['algorithm']}, {len(f['starts_misfit'])} starts, {f['seconds']:.1f} s"
-                 f"{', reused from the checkpoint' if d.get('fit_reused') else ''}): "
-                 f"misfit {f['misfit']:.2f}, {f['n_agree']} start(s) agree, "
-                 + (f"noise floor {np.round(f['sigma'], 1).tolist()} dB" if self.marginal else
-                    f"noise sigma {np.round(f['sigma'], 4).tolist()}")]
-        lines += [f"  note: {n}" for n in f["notes"]]
-        if d.get("sampler") == "smc":
-            lines.append(f"SMC: {d['smc_n_particles']} particles, {d['smc_stages']} tempering stages, "
-                         f"{d['smc_n_evals']} evaluations ({d['seconds']:.1f} s), ESS {d['ess_min']:.0f}, "
-                         f"last acceptance {d['acceptance_mean']:.2f}, distinct particles "
-                         f"{d['smc_unique_share']:.0%}, log evidence {d['smc_log_z']:.2f}, modes known to the "
-                         f"jumps {d.get('smc_modes', 0)}")
-        else:
-            resumed = f", resumed at step {d['resumed_at']}" if d.get("resumed_at") else ""
-            lines.append(f"MCMC: {d['n_walkers']} walkers x {d['chain_steps']} steps ({d['seconds']:.1f} s{resumed}), "
-                         f"max tau {d['tau_max']:.0f} steps, chain/tau {d['steps_over_tau']:.1f}, "
-                         f"min ESS {d['ess_min']:.0f}, acceptance {d['acceptance_mean']:.2f}, "
-                         f"burn {d['burn']}, thin {d['thin']}")
-        lines.append(("converged: " if self.converged else "WARNING: ") + d["reason"])
-        if d.get("weak_engines"):
-            lines.append(f"WARNING: engine(s) {d['weak_engines']} stay near their prior (too weak to identify)")
-        unid = [k for k, v in d["identified"].items() if not v]
-        if unid:
-            lines.append(f"not identified (posterior sd > {IDENTIFIED_RATIO} x prior sd): {', '.join(unid)}")
-        if self.comparison:
-            lines.append("engine-count comparison (LOO):")
-            lines.append(pd.DataFrame(self.comparison).to_string(index=False))
-        table = self.summary()[["mean", "sd", "q05", "q95", "sd_ratio", "identified"]]
-        table.insert(0, "unit", [summary_unit(n) for n in table.index])
-        with pd.option_context("display.width", 140, "display.max_rows", 500):
-            lines.append(table.to_string(float_format=lambda v: f"{v:.4g}"))
-        lines.append("units: m (amplitudes A), rad/s (angular frequencies w; f = w / 2 pi), rad (phases), "
-                     "ratio (C, carrier x sum Gamma), bins (FFT bins), dB; sd_ratio: posterior sd / prior sd")
-        return "\n".join(lines)
+        return report(self, IDENTIFIED_RATIO)
 
-    # ---- plots -------------------------------------------------------------------------
-    def _plot_matrix(self):
+    # ---- plots (:mod:`.result_plots`) ------------------------------------------------------
+    def plot_matrix(self):
+        """(draws x columns, names): the sampled parameters in stored units, phases of
+        measurement 0 unwrapped around their circular mean."""
         cols, names = [], []
         for k in range(self.n_engines):
             for name in SHARED + (("Gamma",) if k else ()):
@@ -363,122 +305,16 @@ class CalibrationResult:
         return np.column_stack(cols), names
 
     def plot_corner(self, path, max_params: int = 24):
-        """Corner plot (corner) of the sampled parameters in physical units (amplitudes in
-        mm, line frequencies f = w / 2 pi in Hz, phases of measurement 0 in rad), one
-        corner per engine (at most ``max_params`` parameters each; the pairs across
-        engines are not drawn), the best fit marked. Written atomically as PNG, sized to
-        be read at full size (about 1 inch per parameter). Fonts follow the caller's
-        matplotlib rcParams (the study's report draws it in :mod:`mdaug.reports.style`)."""
-        import corner
-        import matplotlib
+        """The corner plot (:func:`.result_plots.plot_corner`)."""
+        from .result_plots import plot_corner
 
-        matplotlib.use("Agg", force=False)
-        import matplotlib.pyplot as plt
-        from matplotlib.lines import Line2D
-
-        from ..radar.plots import save_figure
-
-        data, names = self._plot_matrix()
-        best = self.best_fit.reshape(self.n_engines, N_PARAMS)
-        engines = []
-        for k in range(self.n_engines):
-            cols = [i for i, n in enumerate(names) if n.endswith(f"[{k}]") and np.std(data[:, i]) > 0][:max_params]
-            if not cols:
-                continue
-            scale = [_UNITS[names[i].split("[")[0]][1] for i in cols]
-            truths = [best[k, IDX[names[i].split("[")[0]]] * f for i, f in zip(cols, scale)]
-            labels = [_UNITS[names[i].split("[")[0]][0] for i in cols]
-            engines.append((k, data[:, cols] * np.asarray(scale), labels, truths))
-        if not engines:
-            raise ValueError("nothing to plot: no sampled parameter varies")
-        size, left, bottom, top, right = 1.05, 1.0, 0.95, 0.45, 0.15  # inches: panel, margins
-        ncol = 1 if len(engines) == 1 else 2
-        nrow = int(np.ceil(len(engines) / ncol))
-        kmax = max(e[1].shape[1] for e in engines)
-        sub_w, sub_h = kmax * size + left + right, kmax * size + bottom + top
-        head = 0.7
-        fig = plt.figure(figsize=(ncol * sub_w, nrow * sub_h + head))
-        grid = fig.subfigures(2, 1, height_ratios=[head, nrow * sub_h])
-        subs = np.atleast_1d(grid[1].subfigures(nrow, ncol, squeeze=False).ravel())
-        fs = matplotlib.rcParams["font.size"]
-        for sub, (k, x, labels, truths) in zip(subs, engines):
-            sub.subplots(x.shape[1], x.shape[1])
-            corner.corner(x, fig=sub, labels=labels, truths=truths, truth_color="C3", quantiles=(0.05, 0.5, 0.95),
-                          range=[0.99] * x.shape[1], show_titles=False, plot_datapoints=False, smooth=1.0,
-                          max_n_ticks=3, label_kwargs={"fontsize": fs}, labelpad=0.12)
-            for ax in sub.axes:
-                ax.tick_params(labelsize=max(fs - 2, 8))
-                ax.grid(False)
-            sub.subplots_adjust(left=left / sub_w, right=1 - right / sub_w, bottom=bottom / sub_h,
-                                top=1 - top / sub_h, wspace=0.06, hspace=0.06)
-            if len(engines) > 1:
-                sub.suptitle(f"engine {k}", x=left / sub_w, ha="left", y=1 - 0.1 / sub_h, va="top",
-                             fontsize=fs + 2)
-        status = "converged" if self.converged else "NOT converged"
-        grid[0].suptitle(f"{self.class_name} posterior ({status}; {self.n_draws} draws"
-                         + (", phases marginalised" if self.marginal else ", phases of measurement 0")
-                         + "); line frequency f = w / 2 pi", fontsize=fs + 2, x=0.02, ha="left", y=0.9, va="top")
-        grid[0].legend(handles=[Line2D([], [], color="C3", lw=1.5, label="best fit (global fit)"),
-                                Line2D([], [], color="k", ls="--", lw=1, label="5%, 50%, 95% posterior quantiles")],
-                       loc="lower left", bbox_to_anchor=(0.02, 0.0), ncol=2, fontsize=fs, frameon=False)
-        return save_figure(fig, path, dpi=80)
+        return plot_corner(self, path, max_params)
 
     def plot_trace(self, path):
-        """Trace plot: every walker's path per sampled coordinate in physical units
-        (phases as points: they wrap at +-pi), the log posterior, burn-in shaded."""
-        import textwrap
+        """The trace plot (:func:`.result_plots.plot_trace`)."""
+        from .result_plots import plot_trace
 
-        import matplotlib
-
-        matplotlib.use("Agg", force=False)
-        import matplotlib.pyplot as plt
-
-        from ..radar.plots import save_figure
-
-        tr = self.idata["chain_trace"]
-        chain, steps = tr["theta"].values, tr["step"].values
-        names = [str(n) for n in tr["coord"].values]
-        n = len(names)
-        ncol = 4
-        nrow = int(np.ceil((n + 1) / ncol))
-        height = 1.55 * nrow + 0.7
-        fig, axes = plt.subplots(nrow, ncol, figsize=(10.4, height), sharex=True, squeeze=False)
-        burn = self.diagnostics["burn"]
-        fs = matplotlib.rcParams["font.size"]
-        for i, ax in enumerate(axes.ravel()):
-            if i < n:
-                base = names[i].split("[")[0].split("@")[0]
-                label, scale = _UNITS.get(base, (base, 1.0))
-                unit = label[label.index("("):] if "(" in label else ""
-                shown = names[i].replace("w_", "f_") if base.startswith("w_") else names[i]
-                v = chain[:, :, i] * scale
-                if base.startswith("phi_"):  # on the circle: points, not lines across the +-pi wrap
-                    ax.plot(np.repeat(steps, v.shape[1]), v.ravel(), ".", ms=1, color="k", alpha=0.3)
-                else:
-                    ax.plot(steps, v, lw=0.4, alpha=0.35, color="k")
-                ax.set_title(f"{shown} {unit}".strip(), fontsize=fs - 1, loc="left")
-            elif i == n:
-                ax.plot(steps, tr["lp"].values, lw=0.4, alpha=0.35, color="C0")
-                ax.set_title("log posterior", fontsize=fs - 1, loc="left")
-            else:
-                ax.axis("off")
-                continue
-            ax.axvspan(0, burn, color="C3", alpha=0.12)
-            ax.tick_params(labelsize=fs - 3)
-        for c in range(ncol):  # the lowest panel of each column carries the step axis
-            low = max(i for i in range(min(n + 1, nrow * ncol)) if i % ncol == c) if c <= n else None
-            if low is not None:
-                ax = axes.ravel()[low]
-                ax.xaxis.set_tick_params(labelbottom=True)
-                ax.set_xlabel("step", fontsize=fs - 2)
-        title = textwrap.fill(f"{self.class_name}: walkers' paths (burn-in shaded; f = w / 2 pi). "
-                              f"{self.diagnostics['reason']}", 120)
-        lines = 1 + title.count("\n")
-        fig.suptitle(title, fontsize=fs - 1, y=1 - 0.08 / height, va="top")
-        fig.tight_layout()
-        # the first row's panel titles clear of the suptitle
-        fig.subplots_adjust(top=1 - (0.15 + lines * (fs - 1) * 1.35 / 72 + 0.3) / height)
-        return save_figure(fig, path, dpi=100)
+        return plot_trace(self, path)
 
     # ---- files ---------------------------------------------------------------------------
     def save(self, path) -> Path:

@@ -29,6 +29,7 @@ import numpy as np
 from ..generator import N_PARAMS, ClassParams, load_reference
 from ..generator.acquisition import Acquisition
 from ..radar import RadarConfig
+from ..radar.seeds import rng as seeded_rng
 from ..radar.seeds import seed_sequence
 from .layout import Layout
 from .priors import Priors, engine_lines
@@ -64,7 +65,7 @@ def simulate_measurements(truth: np.ndarray, n_measurements: int, acquisition: A
 
     renderer = Renderer(acquisition, normalisation="none", radar=radar, through_chain=True, scene=scene)
     return renderer.render(np.repeat(np.asarray(truth, float)[None], n_measurements, axis=0),
-                           np.random.default_rng(seed))
+                           seeded_rng(seed))
 
 
 def sbc_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, ramps: int, n_measurements: int,
@@ -79,7 +80,7 @@ def sbc_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, ramps: i
     acq = Acquisition.measured(ramps)
     layout = Layout(ref.n_engines, n_measurements, Priors.from_reference(ref, radar), marginal=True)
     truth_ss, data_ss, run_ss = ss.spawn(3)
-    z, _ = layout.split_theta(layout.sample_prior(1, np.random.default_rng(truth_ss)))
+    z, _ = layout.split_theta(layout.sample_prior(1, seeded_rng(truth_ss)))
     truth = layout.shared_physics(z)[0]
     data = simulate_measurements(truth, n_measurements, acq, data_ss, scene, radar)
     t0 = time.perf_counter()

@@ -4,9 +4,10 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
+from .samplers import SAMPLERS  # the registry holds the names
+
 FIT_ALGORITHMS = ("GN_CRS2_LM", "GN_MLSL_LDS", "GN_DIRECT_L", "GN_ISRES", "GN_ESCH")
 LOCAL_ALGORITHMS = ("LN_BOBYQA", "LN_NELDERMEAD", "LN_SBPLX")
-SAMPLERS = ("emcee", "smc", "laplace")
 LIKELIHOODS = ("auto", "marginal", "synthetic", "fitted")
 
 

@@ -50,8 +50,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..radar.seeds import rng as seeded_rng
 from .priors import wrap
-from .samplers import CalibrationInterrupted, SamplerRun, stop_on_sigint
+from .sampler_run import CalibrationInterrupted, SamplerRun, stop_on_sigint
 
 GAMMA_MIX = ((0.25, 0.5), (1.0, 0.4), (None, 0.1))  # (factor of 2.38/sqrt(2 dim) or None = 1.0, weight)
 JITTER = 1e-6  # relative Gaussian jitter of DE proposals (in units of the population sd)
@@ -228,7 +229,7 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
     t0 = time.perf_counter()
     path = None if backend_path is None else Path(backend_path)
     state = _check_checkpoint(path, fp) if path is not None else None
-    rng = np.random.default_rng(seed)
+    rng = seeded_rng(seed)
     if state is not None:
         rng.bit_generator.state = json.loads(str(state["rng_state"]))
         theta, ll, lprior = state["theta"], state["ll"], state["lprior"]

@@ -52,3 +52,11 @@ def rng(random_state=None, *keys) -> np.random.Generator:
     if isinstance(random_state, np.random.Generator) and not keys:
         return random_state
     return np.random.default_rng(seed_sequence(random_state, *keys))
+
+
+def torch_generator(random_state, *keys):
+    """A torch.Generator seeded with :func:`child_seed` of ``random_state`` and the keys
+    (torch is imported only here)."""
+    import torch
+
+    return torch.Generator().manual_seed(child_seed(random_state, *keys))

@@ -29,24 +29,12 @@ from pathlib import Path
 
 from ..generator import load_reference
 from ..radar import NORMALISATIONS
+from ..strategies import STRATEGIES as REGISTRY
 from .validation import ConfigTypeError, check_types, convert, field_types
 
-PUBLISHED_SIGMA_PS = (0.0, 0.05, 0.10, 0.15, 0.20, 0.25, 0.30, 0.40, 0.50, 0.60)
-
-STRATEGIES = ("sigma_p_published", "sigma_p_fit", "posterior", "posterior_specimens", "tsaug")
-"""The training-set strategies compared (what each assumes about new specimens is
-stated in the report, :data:`mdaug.reports.study.STRATEGY_TEXT`):
-
-* ``sigma_p_published``: the published method: sigma_P around the packaged class
-  reference, one chirp at its phases (relative phase perturbation);
-* ``sigma_p_fit``: sigma_P around the calibrated best fit, rendered through the
-  calibration's acquisition (its ramps, random phases, carrier and noise);
-* ``posterior``: draws from the calibrated posterior, through the acquisition;
-* ``posterior_specimens``: posterior draws widened by the specimen model (a common
-  motor-speed factor, amplitude spread, ...), for drones other than the one
-  calibrated; its width chosen on the selection set;
-* ``tsaug``: the conventional baseline, tsaug on the calibration measurements.
-"""
+STRATEGIES = tuple(REGISTRY)
+"""The training-set strategies compared: the names of the registry,
+:data:`mdaug.strategies.STRATEGIES` (what each does and assumes is stated there)."""
 
 
 @dataclass
@@ -76,7 +64,7 @@ class SimulationConfig:
 
 @dataclass
 class ProtocolConfig:
-    sigma_p: tuple[float, ...] = (0.0, 0.1, 0.2, 0.3, 0.4)  # the published grid is PUBLISHED_SIGMA_PS
+    sigma_p: tuple[float, ...] = (0.0, 0.1, 0.2, 0.3, 0.4)  # the published grid: protocol.PUBLISHED_SIGMA_PS
     specimen_widths: tuple[float, ...] = (0.5, 1.0, 2.0)    # x the specimen model's default spreads
     models: tuple[str, ...] = ("svm", "nb", "xgb")          # the fast classifiers that rank the choices
     sweep_n_per_class: int = 1500

@@ -11,18 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..classify.protocol import row_ci
 from .figures_speed import speed_figure, speed_panels  # noqa: F401  (the speed figure lives apart)
 from .numbers import decimals
-from .style import (M_TO_MM, PAGE_WIDTH_IN, RAD_S_PER_HZ, REFERENCE_STYLE, colour, figure_style, save)
-
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    return plt
+from .style import (M_TO_MM, PAGE_WIDTH_IN, RAD_S_PER_HZ, REFERENCE_STYLE, colour, figure_style, pyplot, save)
 
 
 # ---- measured against synthetic profiles ---------------------------------------------------------
@@ -39,7 +31,7 @@ def measured_vs_synthetic(measured: dict, synthetic: dict, path, normalisation: 
 
     bin_m = RadarConfig().bin_m if bin_m is None else float(bin_m)
     classes = list(measured)
-    plt = _plt()
+    plt = pyplot()
     with figure_style():
         fig, axes = plt.subplots(len(classes), 1, figsize=(PAGE_WIDTH_IN, 3.3 * len(classes) + 0.6),
                                  sharex=True, squeeze=False)
@@ -90,7 +82,7 @@ def strategies_figure(results: dict, test: str, chosen, ceiling: tuple | None):
 
     chosen: the chosen strategy's name, or the names tied on the selection set;
     ceiling: (label, balanced accuracy, [lo, hi]) or None."""
-    plt = _plt()
+    plt = pyplot()
     chosen = [chosen] if isinstance(chosen, str) else list(chosen or [])
     mark = " (chosen)" if len(chosen) == 1 else " (tied choice)"
     classes = list(results["config"]["classes"])
@@ -137,7 +129,7 @@ def strategies_figure(results: dict, test: str, chosen, ceiling: tuple | None):
 def confusion_figure(results: dict, test: str):
     """Every strategy's confusion matrix on set ``test`` (counts and row shares), each
     titled with its balanced accuracy and 95% interval."""
-    plt = _plt()
+    plt = pyplot()
     names = [n for n, s in results["strategies"].items() if test in s["tests"]]
     ncol = min(len(names), 5)
     nrow = int(np.ceil(len(names) / ncol))
@@ -178,7 +170,7 @@ def sweeps_figure(results: dict, test: str | None):
     """Balanced accuracy against each strategy's setting (sigma_P, specimen width),
     one line per fast classifier: on the selection set (solid, with its 95% interval;
     the choice is made here) and on the test set ``test`` (dashed, for information)."""
-    plt = _plt()
+    plt = pyplot()
     rows = results["candidates"]["rows"]
     sel = results["selection"]["set"]
     strategies = [s for s in dict.fromkeys(r["strategy"] for r in rows)]
@@ -193,8 +185,8 @@ def sweeps_figure(results: dict, test: str | None):
                 for set_name, ls, marker in ((sel, "-", "o"), (test, "--", "x")):
                     if set_name is None:
                         continue
-                    pts = sorted((r["value"], r["balanced_accuracy"], r.get("balanced_ci")) for r in rows
-                                 if r["strategy"] == strat and r["model"] == model and r["set"] == set_name)
+                    pts = sorted((r["value"], r["balanced_accuracy"], row_ci(r)) for r in rows
+                                 if r["strategy"] == strat and r["model"] == model and r["test_set"] == set_name)
                     if not pts:
                         continue
                     x = np.array([p[0] for p in pts])
@@ -236,7 +228,7 @@ def posterior_lines_figure(cal: dict, cls: str):
     """The label-free posterior of a class, one panel per engine: each vibration line's
     frequency (Hz) and amplitude (mm), median with its 5-95% posterior interval in both
     directions, and the class reference's line frequencies (dashed)."""
-    plt = _plt()
+    plt = pyplot()
     lines = cal["lines"]
     fq = np.asarray(lines["frequency_q"], float) / RAD_S_PER_HZ  # (3, E, 4) Hz
     aq = np.asarray(lines["amplitude_q"], float) * M_TO_MM        # (3, E, 4) mm

@@ -7,16 +7,7 @@ import re
 
 import numpy as np
 
-from .style import PAGE_WIDTH_IN, REFERENCE_STYLE, colour, figure_style
-
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    return plt
+from .style import PAGE_WIDTH_IN, REFERENCE_STYLE, colour, figure_style, pyplot
 
 
 # ---- speed against error -------------------------------------------------------------------------
@@ -109,7 +100,7 @@ def _scale(ax, values, axis: str, room: float = 1.3):
 def speed_figure(results: dict, test: str | None):
     """One panel per stage: cost against error (0 = the reference the others are
     compared with); training spans two panels, with a legend."""
-    plt = _plt()
+    plt = pyplot()
     panels = speed_panels(results, test)
     if not panels:
         return None

@@ -2,90 +2,24 @@
 
 Each job takes one dict (its settings and its own seed) and returns plain data, so
 any executor (serial, processes, dask) gives the same results. A training-set
-strategy is a small dict (``spec``) that :func:`augmenters` turns into one
-augmenter per class; :func:`training_set` is the study's one way to build a set
-(through :func:`mdaug.generator.make_dataset`, or tsaug's :func:`tsaug_set`).
+strategy at one setting is a :class:`mdaug.strategies.TrainingSpec` (``spec``); its
+set comes from :func:`mdaug.strategies.training_set`, the registry's one builder.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
-MIN_GROUPS = 5
+from ..strategies import STRATEGIES, TrainingSpec, training_set
 
 
 def _threads(n: int = 1) -> None:
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(n)
-
-
-def augmenters(spec: dict, classes) -> list:
-    """One augmenter per class for a model-based strategy spec:
-
-    ``strategy`` (sigma_p_published | sigma_p_fit | posterior | posterior_specimens),
-    ``sigma_p``, ``width`` (specimen model), ``posteriors`` {class: NetCDF},
-    ``acquisition`` (dict, for the model-based strategies other than the published
-    one: None = each calibration's measured acquisition), ``through_chain``,
-    ``normalisation``."""
-    from ..generator import Acquisition, Renderer, SigmaPSource, SpecimenSource, SpecimenSpread
-    from ..generator.augment import ModelAugmenter
-
-    kind, norm = spec["strategy"], spec.get("normalisation", "peak")
-    out = []
-    for c in classes:
-        if kind == "sigma_p_published":
-            src = SigmaPSource(c, spec["sigma_p"], perturb_phases=True)
-            acq = Acquisition()
-        else:
-            from ..inference.posterior_augment import PosteriorSource, load_posterior
-
-            post = load_posterior(spec["posteriors"][c], c)
-            acq = (post.measured_acquisition() if spec.get("acquisition") is None
-                   else Acquisition.from_dict(spec["acquisition"]))
-            if kind == "sigma_p_fit":
-                src = SigmaPSource(post.best_fit, spec["sigma_p"], perturb_phases=False, label=c)
-            elif kind in ("posterior", "posterior_specimens"):
-                src = PosteriorSource(post, label=c)
-                if kind == "posterior_specimens" and spec.get("width"):
-                    src = SpecimenSource(src, SpecimenSpread(width=float(spec["width"])))
-            else:
-                raise ValueError(f"unknown training strategy {kind!r}")
-        out.append(ModelAugmenter(src, Renderer(acq, norm, through_chain=bool(spec.get("through_chain")))))
-    return out
-
-
-def training_set(spec: dict, classes, n_per_class: int, seed):
-    """(X, y, groups) for one strategy spec; groups (tsaug only) is each copy's source
-    profile, so that the CNN's validation split never holds a copy of a profile it
-    trains on; None for model-based sets."""
-    if spec["strategy"] == "tsaug":
-        from ..classify import tsaug_set
-
-        X, y, sources = tsaug_set(np.asarray(spec["profiles"]), np.asarray(spec["labels"]), n_per_class, seed,
-                                  normalisation=spec.get("normalisation", "peak"))
-        per_class = [np.unique(sources[y == c]).size for c in np.unique(y)]
-        # a grouped 80/10/10 split needs a few sources per class; with fewer, the
-        # validation split holds copies of training profiles (documented in the report)
-        return X, y, (sources if min(per_class) >= MIN_GROUPS else None)
-    from ..generator import make_dataset
-
-    ds = make_dataset(augmenters(spec, classes), n_per_class, seed, progress=False)
-    return ds.profiles, ds.labels, None
-
-
-def _evaluate_all(clf, tests: dict, classes, n_boot: int, seed) -> dict:
-    from ..classify import evaluate
-
-    out = {}
-    for name, (Xt, yt) in tests.items():
-        t0 = time.perf_counter()
-        m = evaluate(np.asarray(yt), clf.predict(np.asarray(Xt)), labels=sorted(classes), n_boot=n_boot,
-                     random_state=seed)
-        m["predict_seconds"] = time.perf_counter() - t0
-        out[name] = m
-    return out
 
 
 def calibrate_class(job: dict) -> dict:
@@ -139,25 +73,39 @@ def fit_predict(job: dict) -> dict:
                                                        for n, (Xt, _) in job["tests"].items()}}
 
 
-def candidate(job: dict) -> dict:
-    """One choice candidate (a strategy at one sigma_P or width): its training set, the
-    fast classifiers trained on it and scored on every set given (the selection set
-    ranks the candidates; the test sets are only reported)."""
-    from ..classify import make_classifier
+@dataclass(frozen=True)
+class StrategySets:
+    """Picklable ``make_train(value, seed) -> (X, y)`` of the sweep job
+    (:class:`mdaug.classify.protocol.SweepJob`): ``spec``'s training set with its
+    setting at ``value``."""
+
+    spec: TrainingSpec
+    classes: tuple
+    n_per_class: int
+
+    def __call__(self, value, seed):
+        param = STRATEGIES[self.spec.strategy].parameter
+        spec = self.spec if param is None else dataclasses.replace(self.spec, **{param: value})
+        X, y, _ = training_set(spec, list(self.classes), self.n_per_class, seed)
+        return X, y
+
+
+def candidate(job: dict) -> list[dict]:
+    """One choice candidate (a strategy at one sigma_P or width): the sweep's job
+    (:func:`mdaug.classify.protocol.run_sweep_job`: its training set, the fast
+    classifiers trained on it and scored on every set given; the selection set ranks
+    the candidates, the test sets are only reported), all from the job's one seed.
+    Its rows: the sweep's (the setting's value under ``sigma_p``)."""
+    from ..classify.protocol import SweepJob, run_sweep_job
 
     _threads(job.get("threads", 1))
-    t0 = time.perf_counter()
-    X, y, _ = training_set(job["spec"], job["classes"], job["n_per_class"], job["seed"])
-    t_data = time.perf_counter() - t0
-    models = {}
-    for name in job["models"]:
-        clf = make_classifier(name, random_state=job["seed"], normalisation=job["spec"].get("normalisation", "peak"))
-        t1 = time.perf_counter()
-        clf.fit(X, y)
-        models[name] = {"train_seconds": time.perf_counter() - t1,
-                        "tests": _evaluate_all(clf, job["tests"], job["classes"], job["n_boot"], job["seed"])}
-    return {"spec": {k: v for k, v in job["spec"].items() if k not in ("profiles", "labels")},
-            "data_seconds": t_data, "n_train": int(len(y)), "models": models}
+    spec, seed = job["spec"], job["seed"]
+    sweep = SweepJob(index=0, sigma_p=spec.setting, train_seed=seed, model_seeds={m: seed for m in job["models"]},
+                     make_train=StrategySets(spec, tuple(job["classes"]), job["n_per_class"]),
+                     test_sets=job["tests"], models=tuple(job["models"]),
+                     model_params={m: {"normalisation": spec.normalisation} for m in job["models"]},
+                     n_boot=job["n_boot"], boot_seed=seed)
+    return run_sweep_job(sweep)
 
 
 def train_and_test(job: dict) -> dict:
@@ -186,7 +134,7 @@ def train_and_test(job: dict) -> dict:
                      "epochs_run": (getattr(clf, "split_scores_", None) or {}).get("epochs_run"),
                      "predictions": {name: encode(clf.predict(np.asarray(Xt)), classes)
                                      for name, (Xt, _) in job["tests"].items()}})
-    spec = {k: v for k, v in job["spec"].items() if k not in ("profiles", "labels")}
+    spec = job["spec"].to_dict()
     return {"strategy": job["name"], "model": job["model"], "spec": spec, "sigma_p": spec.get("sigma_p"),
             "width": spec.get("width"), "seeds": [r["seed"] for r in runs], "n_train": int(len(y)),
             "data_seconds": t_data, "train_seconds": float(sum(r["train_seconds"] for r in runs)),

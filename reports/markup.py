@@ -49,12 +49,14 @@ class Html:
             return text
         return f'<span data-key="{html.escape(key)}">{text}</span>'
 
-    def val_ci(self, key: str | None, value, ci_key: str | None, ci, d: int | None = None, br: bool = False) -> str:
+    def val_ci(self, key: str | None, value, ci_key, ci, d: int | None = None, br: bool = False) -> str:
+        """``value [lo, hi]``; ``ci_key``: the interval's key (its items .0 and .1), or
+        the pair of keys of lo and hi."""
         d = decimals(ci) if d is None else d
         s = self.num(key, value, d)
         if ci:
-            s += ("<br>" if br else " ") + (f'<span class="ci">[{self.num(ci_key and ci_key + ".0", ci[0], d)}, '
-                  f'{self.num(ci_key and ci_key + ".1", ci[1], d)}]</span>')
+            lo, hi = ci_key if isinstance(ci_key, tuple) else (ci_key and ci_key + ".0", ci_key and ci_key + ".1")
+            s += ("<br>" if br else " ") + f'<span class="ci">[{self.num(lo, ci[0], d)}, {self.num(hi, ci[1], d)}]</span>'
         return s
 
 

@@ -3,6 +3,7 @@ test set), the best strategy (or the strategies tied there, with the rule), the
 published peeking choice recorded and not used, the sweeps."""
 from __future__ import annotations
 
+from ..classify.protocol import row_ci
 from . import figures
 from .markup import Figures, Html, details, table, td
 from .numbers import decimals, join
@@ -66,10 +67,10 @@ def choice_section(r: dict, j: dict, figs: Figures, w: Html) -> str:
         for i, row in enumerate(r["candidates"]["rows"]):
             k = f"candidates.rows.{i}"
             rows.append([td(w.esc(row["strategy"]), False), td(w.num(f"{k}.value", row["value"], 2)),
-                         td(w.esc(row["model"]), False), td(w.esc(row["set"]), False),
-                         td(w.val_ci(f"{k}.balanced_accuracy", row["balanced_accuracy"], f"{k}.balanced_ci",
-                                     row.get("balanced_ci"), br=True)),
-                         td(w.num(f"{k}.accuracy", row["accuracy"], decimals(row.get("balanced_ci")))),
+                         td(w.esc(row["model"]), False), td(w.esc(row["test_set"]), False),
+                         td(w.val_ci(f"{k}.balanced_accuracy", row["balanced_accuracy"],
+                                     (f"{k}.balanced_lo", f"{k}.balanced_hi"), row_ci(row), br=True)),
+                         td(w.num(f"{k}.accuracy", row["accuracy"], decimals(row_ci(row)))),
                          td(w.num(f"{k}.min_recall", row["min_recall"], 2)),
                          td(w.num(f"{k}.train_seconds", row["train_seconds"], 2))])
         out.append(details("Every candidate in numbers",

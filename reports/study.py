@@ -40,25 +40,15 @@ import numpy as np
 
 from ..radar import atomic_savez, atomic_write, load_profiles
 from ..radar.seeds import child_seed
+from ..strategies import STRATEGIES, TrainingSpec, training_set
 from . import jobs, statistics, verdicts
 from .cache import StageCache, settings_key
 from .config import StudyConfig
 from .executor import make_executor
-from .study_training import PARAMETER, TrainingStages
+from .study_training import TrainingStages, chosen_spec
 
-STRATEGY_TEXT = {
-    "sigma_p_published": "the published method: sigma_P around the packaged class reference, one chirp at its "
-                         "phases; assumes new drones are the reference drone seen as the fit was, up to sigma_P",
-    "sigma_p_fit": "sigma_P around the calibrated best fit, through the measured acquisition; assumes new drones "
-                   "are the calibrated drone up to an unstructured relative spread sigma_P",
-    "posterior": "draws from the calibrated posterior, through the measured acquisition; assumes new drones are "
-                 "the calibrated drone (only its measurement uncertainty)",
-    "posterior_specimens": "posterior draws widened by the specimen model (common motor-speed factor, amplitude "
-                           "spread), through the measured acquisition; assumes new drones differ from the "
-                           "calibrated one as drones of one model do",
-    "tsaug": "tsaug (drift, pool, reverse) on the calibration measurements; assumes new drones look like "
-             "distorted copies of the measured ones",
-}
+
+
 def _stage_seed(cfg: StudyConfig, *keys) -> int:
     return child_seed(cfg.seed, *keys)
 
@@ -206,27 +196,23 @@ class Study(TrainingStages):
         return {c: self.calibrate(c, acquisition) for c in self.cfg.classes}
 
     # ---- stages 3-4: candidates and the choice ---------------------------------------------
-    def specs(self, calib: dict, tsaug_sources) -> dict:
-        """{strategy: [spec, ...]}: every strategy at every value of its setting."""
+    def specs(self, calib: dict, tsaug_sources) -> dict[str, list[TrainingSpec]]:
+        """{strategy: [spec, ...]}: every strategy at every value of its setting (the
+        published one rendered as the published single chirp, never through the chain)."""
         p = self.cfg.protocol
         posts = {c: calib[c]["posterior"] for c in self.cfg.classes}
-        common = {"normalisation": p.normalisation, "through_chain": p.through_chain}
         out = {}
         for name in p.strategies:
-            if name in ("sigma_p_published", "sigma_p_fit"):
-                out[name] = [{"strategy": name, "sigma_p": float(s), "posteriors": posts, **common} for s in p.sigma_p]
-            elif name == "posterior":
-                out[name] = [{"strategy": name, "posteriors": posts, **common}]
-            elif name == "posterior_specimens":
-                out[name] = [{"strategy": name, "width": float(w), "posteriors": posts, **common}
-                             for w in p.specimen_widths]
-            elif name == "tsaug":
-                out[name] = [{"strategy": "tsaug", "profiles": tsaug_sources[0], "labels": tsaug_sources[1],
-                              "normalisation": p.normalisation}]
-        for specs in out.values():  # the published path is the published single chirp
-            for s in specs:
-                if s["strategy"] == "sigma_p_published":
-                    s["through_chain"] = False
+            s = STRATEGIES[name]
+            if name == "tsaug":
+                out[name] = [TrainingSpec(name, normalisation=p.normalisation, profiles=tsaug_sources[0],
+                                          labels=tsaug_sources[1])]
+                continue
+            values = {"sigma_p": p.sigma_p, "width": p.specimen_widths, None: (None,)}[s.parameter]
+            out[name] = [TrainingSpec(name, posteriors=posts, normalisation=p.normalisation,
+                                      through_chain=bool(p.through_chain and s.study_chain),
+                                      **({} if s.parameter is None else {s.parameter: float(v)}))
+                         for v in values]
         return out
 
     def candidates(self, specs: dict, select, tests: dict, executor) -> dict:
@@ -235,7 +221,8 @@ class Study(TrainingStages):
         sets = {sel_name: sel_data, **tests}
 
         def compute():
-            todo = [(name, i, s) for name, ss in specs.items() if PARAMETER[name] is not None for i, s in enumerate(ss)]
+            todo = [(name, i, s) for name, ss in specs.items() if STRATEGIES[name].parameter is not None
+                    for i, s in enumerate(ss)]
             job_list = [{"spec": s, "classes": list(self.cfg.classes), "n_per_class": p.sweep_n_per_class,
                          "seed": _stage_seed(self.cfg, "candidate", name, i), "models": list(p.models),
                          "tests": sets, "n_boot": p.n_boot} for name, i, s in todo]
@@ -244,24 +231,16 @@ class Study(TrainingStages):
             rows = []
             with progress_bar(total=len(job_list), desc="choice candidates", unit="candidate", leave=False) as bar:
                 for (name, i, spec), res in zip(todo, _imap(executor, jobs.candidate, job_list)):
-                    for model, m in res["models"].items():
-                        for set_name, metrics in m["tests"].items():
-                            rows.append({"strategy": name, "parameter": PARAMETER[name],
-                                         "value": spec[PARAMETER[name]], "model": model, "set": set_name,
-                                         "accuracy": metrics["accuracy"],
-                                         "balanced_accuracy": metrics["balanced_accuracy"],
-                                         "balanced_ci": (metrics.get("ci") or {}).get("balanced_accuracy"),
-                                         "min_recall": min(v["recall"] for v in metrics["per_class"].values()
-                                                           if v["recall"] is not None),
-                                         "train_seconds": m["train_seconds"]})
+                    param = STRATEGIES[name].parameter
+                    rows += [{"strategy": name, "parameter": param, "value": r.pop("sigma_p"), **r} for r in res]
                     bar.update(1)
             return {"rows": rows, "selection_set": sel_name}
-        return self.cache.run("candidates", self.cand_key, compute)
+        return self.cache.run("candidates", settings_key(self.cand_key, "rows of the sweep job"), compute)
 
     @staticmethod
     def choose(rows: list[dict], strategy: str, on: str) -> dict:
         """The value of ``strategy``'s setting chosen on set ``on`` (:func:`.verdicts.choose_setting`)."""
-        return verdicts.choose_setting(rows, strategy, PARAMETER[strategy], on)
+        return verdicts.choose_setting(rows, strategy, STRATEGIES[strategy].parameter, on)
 
     # ---- figures -------------------------------------------------------------------------------
     def profiles_figure(self, specs: dict, choice: dict, tests: dict) -> str:
@@ -272,11 +251,10 @@ class Study(TrainingStages):
             X, y = tests["new"] if "new" in tests else next(iter(tests.values()))
             synthetic = {}
             for name, ss in specs.items():
-                param = PARAMETER[name]
                 if name == "tsaug":
                     continue
-                spec = ss[0] if param is None else next(s for s in ss if s[param] == choice[name]["value"])
-                Xs, ys, _ = jobs.training_set(spec, list(self.cfg.classes), 300 if not self.cfg.quick else 60,
+                spec = chosen_spec(ss, choice.get(name))
+                Xs, ys, _ = training_set(spec, list(self.cfg.classes), 300 if not self.cfg.quick else 60,
                                               _stage_seed(self.cfg, "figure", name))
                 synthetic[_label(name, spec)] = {c: Xs[ys == c] for c in self.cfg.classes}
             path = self.out / "figures" / "profiles.png"
@@ -310,7 +288,7 @@ class Study(TrainingStages):
             cand = self.candidates(specs, select, tests, executor)
             sel_name = select[0]
             peek = "new" if "new" in tests else next(iter(tests))
-            choice = {n: self.choose(cand["rows"], n, sel_name) for n in specs if PARAMETER[n] is not None}
+            choice = {n: self.choose(cand["rows"], n, sel_name) for n in specs if STRATEGIES[n].parameter is not None}
             published_peeking = self.choose(cand["rows"], "sigma_p_published", peek) \
                 if "sigma_p_published" in specs else None
             for n, c in choice.items():
@@ -329,7 +307,7 @@ class Study(TrainingStages):
             "data": index["sets"], "acquisition": index["acquisition"], "acquisition_text": acq.describe(),
             "selection": {"set": sel_name, "what": select[2]},
             "calibration": calib, "candidates": cand, "choice": choice, "published_peeking_choice": published_peeking,
-            "truth": truth, "strategies": _jsonable(strategies), "strategy_text": {n: STRATEGY_TEXT[n] for n in strategies},
+            "truth": truth, "strategies": _jsonable(strategies), "strategy_text": {n: STRATEGIES[n].text for n in strategies},
             "ceiling": _jsonable(ceiling), "speed": speed, "profiles_figure": figure,
             "timings": dict(self.cache.timings), "resumed_stages": list(self.cache.resumed),
             "total_seconds": time.perf_counter() - t_start,
@@ -354,9 +332,9 @@ def stage_names(cfg: StudyConfig) -> list[str]:
     return names + (["ceiling"] if cfg.simulated else []) + ["speed"]
 
 
-def _label(name: str, spec: dict) -> str:
-    param = PARAMETER[name]
-    return name + ("" if param is None else f" ({param} {spec[param]:g})")
+def _label(name: str, spec: TrainingSpec) -> str:
+    param = STRATEGIES[name].parameter
+    return name + ("" if param is None else f" ({param} {spec.setting:g})")
 
 
 def _imap(executor, fn, items):

@@ -15,13 +15,19 @@ from __future__ import annotations
 import numpy as np
 
 from ..radar.seeds import child_seed
+from ..radar.seeds import rng as seeded_rng
+from ..strategies import TrainingSpec
 from . import jobs
 from .cache import settings_key
 
-PARAMETER = {"sigma_p_published": "sigma_p", "sigma_p_fit": "sigma_p", "posterior": None,
-             "posterior_specimens": "width", "tsaug": None}
-"""The setting each strategy's choice is about (None: nothing to choose)."""
 CEILING_MODELS = ("svm", "xgb", "nb", "cnn")
+
+
+def chosen_spec(specs: list[TrainingSpec], choice: dict | None) -> TrainingSpec:
+    """The spec at the chosen value of its setting (a strategy without one: its only spec)."""
+    if choice is None:
+        return specs[0]
+    return next(s for s in specs if s.setting == choice["value"])
 
 
 def run_seeds(first: int, seed: int, n: int, *keys) -> list[int]:
@@ -38,8 +44,7 @@ class TrainingStages:
         sel_name, sel_data, _ = select
         out = {}
         for name, ss in specs.items():
-            param = PARAMETER[name]
-            spec = ss[0] if param is None else next(s for s in ss if s[param] == choice[name]["value"])
+            spec = chosen_spec(ss, choice.get(name))
             tsaug = name == "tsaug"
             sets = {sel_name: sel_data, **tests}
             if tsaug:  # tsaug copies the calibration measurements: never scored on them
@@ -54,8 +59,7 @@ class TrainingStages:
         return out
 
     def _cnn_key(self, job: dict) -> str:
-        spec = {k: v for k, v in job["spec"].items() if k not in ("profiles", "labels")}
-        return settings_key(self.cnn_key, job["name"], spec, job["run_seeds"])
+        return settings_key(self.cnn_key, job["name"], job["spec"].to_dict(), job["run_seeds"])
 
     def cnns(self, cnn_jobs: dict, executor) -> dict:
         """Every strategy's stage result (cached; uncached strategies go to the executor together)."""
@@ -84,7 +88,7 @@ class TrainingStages:
             scene = SceneConfig(n_ramps=sim.ramps)
             parts, labels = [], []
             for c in self.cfg.classes:
-                rng = np.random.default_rng(child_seed(self.cfg.seed, "ceiling", c))  # as before: same specimens
+                rng = seeded_rng(child_seed(self.cfg.seed, "ceiling", c))  # as before: same specimens
                 specimens = draw_specimens(load_reference(c).to_array(), 2 * sim.new_specimens, scene, rng)
                 x = specimens[np.arange(sim.ceiling_per_class) % len(specimens)]
                 parts.append(render_through_chain(x, scene, random_state=child_seed(self.cfg.seed, "ceiling-chain",

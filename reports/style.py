@@ -63,6 +63,16 @@ RAD_S_PER_HZ = 2.0 * np.pi
 M_TO_MM = 1e3
 
 
+def pyplot():
+    """matplotlib.pyplot on the non-interactive backend (imported on first use)."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
 def colour(name: str, i: int = 0) -> str:
     """The colour of a class or strategy (matplotlib's cycle for other names)."""
     return CLASS_COLOURS.get(name) or STRATEGY_COLOURS.get(name) or f"C{i % 10}"

@@ -17,7 +17,7 @@ The rules:
 * **better / worse / level**: a paired difference in mean balanced accuracy whose
   95% interval lies above 0 / below 0 / contains 0;
 * **ties**: on the selection set, results whose mean balanced accuracy is within
-  :data:`TIE` of the best are tied; tied strategies are reported as tied (none of
+  :data:`TIE` of the best are tied (the one rule, :func:`mdaug.classify.protocol.choose`); tied strategies are reported as tied (none of
   them is "the" choice); the ceiling's model among tied ones goes to the CNN (like for
   like with the strategies' CNNs), then by :data:`CEILING_ORDER`;
 * **ceiling at chance**: the chosen ceiling model's balanced-accuracy interval on the
@@ -30,7 +30,8 @@ from __future__ import annotations
 
 import numpy as np
 
-TIE = 0.01
+from ..classify.protocol import PREFER, TIE, choose, ties
+
 CHANCE = 0.5
 FAR = 0.5
 CEILING_ORDER = ("cnn", "svm", "xgb", "nb")
@@ -129,37 +130,22 @@ def comparison(results: dict, test: str, a: str, b: str) -> dict | None:
     return {"a": a, "b": b, "difference": d["difference"], "ci": d["ci"], "word": word(d["ci"])}
 
 
-def ties(scores: dict, tie: float = TIE) -> list[str]:
-    """The names whose score is within ``tie`` of the best, best first (then in the
-    given order); [] when there are no scores."""
-    if not scores:
-        return []
-    top = max(scores.values())
-    return sorted((n for n, s in scores.items() if s >= top - tie - 1e-12), key=lambda n: -scores[n])
-
-
-SETTING_TIE_RULE = {"sigma_p": "smaller", "width": "larger"}
-"""How ties between settings go: the smaller sigma_P (the published rule), the larger
-specimen width (the selection set holds only the calibrated drone, which cannot tell
-how much new drones differ: among equals, assume more variation)."""
-
-
 def choose_setting(rows: list[dict], strategy: str, param: str | None, on: str) -> dict:
     """The value of ``strategy``'s setting with the best mean balanced accuracy (over the
-    fast classifiers) on set ``on``; values within :data:`TIE` of it are tied and the tie
-    goes by :data:`SETTING_TIE_RULE` (stated in ``rule``)."""
+    fast classifiers) on set ``on``, by the one choice rule
+    (:func:`mdaug.classify.protocol.choose`: values within :data:`TIE` of it are tied,
+    the tie goes to the smaller sigma_P, the larger width; stated in ``rule``)."""
     by_value: dict[float, list[float]] = {}
     for r in rows:
-        if r["strategy"] == strategy and r["set"] == on:
+        if r["strategy"] == strategy and r["test_set"] == on:
             by_value.setdefault(float(r["value"]), []).append(r["balanced_accuracy"])
     if not by_value:
         return {"value": None, "set": on, "scores": {}}
     means = {v: float(np.mean(s)) for v, s in sorted(by_value.items())}
-    tied = sorted(ties(means))
-    value = min(tied) if SETTING_TIE_RULE.get(param) == "smaller" else max(tied)
+    value, tied = choose(means, PREFER.get(param), TIE)
     return {"value": value, "parameter": param, "set": on, "scores": means, "tied": tied,
             "rule": f"best mean balanced accuracy of {', '.join(sorted({r['model'] for r in rows}))}; ties within "
-                    f"{TIE} to the {SETTING_TIE_RULE.get(param)} {param}"}
+                    f"{TIE} to the {PREFER.get(param)} {param}"}
 
 
 def best_strategy(strategies: dict, on: str) -> dict:

@@ -167,7 +167,7 @@ def test_cli_baseline_cross_validates_and_saves(files, capsys):
 def test_sweep_in_worker_processes_matches_serial():
     from concurrent.futures import ProcessPoolExecutor
 
-    from mdaug.cli.classify import SyntheticTrainSet
+    from mdaug.cli.sweep import SyntheticTrainSet
     from mdaug.generator import SigmaPAugmenter, make_dataset
 
     ds = make_dataset([SigmaPAugmenter("HELI", 0.1), SigmaPAugmenter("QUAD", 0.1)], 30, 5)

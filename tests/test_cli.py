@@ -64,7 +64,8 @@ def test_verb_help_exits_0_and_shows_units_and_defaults(verb, capsys):
 
 
 def test_option_choices_match_the_library():
-    from mdaug.cli import common, data
+    from mdaug.cli import data
+    from mdaug.cli import options as common
     from mdaug.generator import PHASE_TREATMENTS, SIGN_POLICIES
     from mdaug.generator.chain import SCENE_PHASES
     from mdaug.radar import NORMALISATIONS

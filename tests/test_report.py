@@ -17,7 +17,7 @@ from mdaug.reports import figures, statistics, verdicts
 from mdaug.reports.config import StudyConfig
 from mdaug.reports.readme import BEGIN, END, README, check_readme, current_section, replace_section, results_section
 from mdaug.reports.report import SECTIONS, command, decimals, get, write_report
-from mdaug.reports.study import STRATEGY_TEXT
+from mdaug.strategies import STRATEGIES
 
 ROOT = Path(__file__).resolve().parents[1]
 CLASSES = ["HELI", "QUAD"]
@@ -97,9 +97,10 @@ def synthetic_results(folder: Path, sbc: bool = False) -> dict:
             for model in cfg.protocol.models:
                 for s, (n1, n2) in (("select", (12, 12)), ("new", (44, 92)), ("new_large", (176, 368))):
                     m = _metrics(0.6 + 0.2 * v, 0.7, n1, n2, seed=int(100 * v) + len(rows))
-                    rows.append({"strategy": name, "parameter": param, "value": float(v), "model": model, "set": s,
-                                 "accuracy": m["accuracy"], "balanced_accuracy": m["balanced_accuracy"],
-                                 "balanced_ci": m["ci"]["balanced_accuracy"],
+                    rows.append({"strategy": name, "parameter": param, "value": float(v), "model": model,
+                                 "test_set": s, "accuracy": m["accuracy"], "balanced_accuracy": m["balanced_accuracy"],
+                                 "balanced_lo": m["ci"]["balanced_accuracy"][0],
+                                 "balanced_hi": m["ci"]["balanced_accuracy"][1],
                                  "min_recall": min(c["recall"] for c in m["per_class"].values()),
                                  "train_seconds": 0.5})
     choice = {name: {"value": value, "parameter": param, "set": "select",
@@ -169,7 +170,7 @@ def synthetic_results(folder: Path, sbc: bool = False) -> dict:
         "calibration": {"HELI": calibration("HELI", 1), "QUAD": calibration("QUAD", 4)},
         "candidates": {"rows": rows, "selection_set": "select"}, "choice": choice,
         "published_peeking_choice": {"value": 0.0, "parameter": "sigma_p", "set": "new", "scores": {"0.0": 0.5}},
-        "truth": truth, "strategies": strategies, "strategy_text": {n: STRATEGY_TEXT[n] for n in strategies},
+        "truth": truth, "strategies": strategies, "strategy_text": {n: STRATEGIES[n].text for n in strategies},
         "invocation": "mdaug run --out /data/my-study", "ceiling": ceiling, "speed": speed, "profiles_figure": _png(folder / "figures" / "profiles.png"),
         "timings": {"data": 40.0, "calibrate_HELI": 250.0}, "resumed_stages": ["data"], "total_seconds": 900.0}
     results = statistics.score_study(json.loads(json.dumps(results)))

@@ -92,18 +92,18 @@ def test_a_paired_difference_is_narrower_than_an_unpaired_one():
 # ---- acceptance: one strategy trained with 3 seeds ------------------------------------------------------
 def test_three_training_runs_each_lie_inside_the_reported_interval(tmp_path):
     from mdaug.radar.seeds import child_seed
-    from mdaug.reports import jobs
     from mdaug.reports.config import StudyConfig
     from mdaug.reports.executor import SerialExecutor
     from mdaug.reports.study import Study
+    from mdaug.strategies import TrainingSpec, training_set
 
     import dataclasses
 
     cfg = StudyConfig(seed=7).quick_version()
     cfg.protocol = dataclasses.replace(cfg.protocol, cnn_n_per_class=100, cnn_epochs=4)
     study = Study(cfg, tmp_path, log=lambda *_: None)
-    spec = {"strategy": "sigma_p_published", "sigma_p": 0.2, "normalisation": "peak", "through_chain": False}
-    X, y, _ = jobs.training_set({**spec, "sigma_p": 0.4}, CLASSES, 40, seed=99)  # other drones, to test on
+    spec = TrainingSpec("sigma_p_published", sigma_p=0.2, normalisation="peak", through_chain=False)
+    X, y, _ = training_set(dataclasses.replace(spec, sigma_p=0.4), CLASSES, 40, seed=99)  # other drones, to test on
     run_jobs = study.cnn_jobs({"sigma_p_published": [spec]}, {"sigma_p_published": {"value": 0.2}},
                               ("select", (X[:20], y[:20]), "x"), {"new": (X, y)})
     job = run_jobs["sigma_p_published"]

@@ -46,7 +46,7 @@ def test_quick_study_writes_results_that_match_its_report(quick_study):
 
 def test_quick_study_compares_every_strategy_with_intervals(quick_study):
     from mdaug.reports.config import STRATEGIES
-    from mdaug.reports.study import PARAMETER
+    from mdaug.strategies import STRATEGIES as REGISTRY
 
     results = json.loads((quick_study / "results.json").read_text())
     assert set(results["strategies"]) == set(STRATEGIES)
@@ -58,7 +58,7 @@ def test_quick_study_compares_every_strategy_with_intervals(quick_study):
         assert lo <= m["balanced_accuracy"] <= hi
         assert set(m["per_class"]) == {"HELI", "QUAD"}
         assert "select" in s["tests"]  # every strategy is scored on the selection set too
-        param = PARAMETER[name]
+        param = REGISTRY[name].parameter
         if param is not None:  # each CNN trained at its strategy's choice, made on the selection set only
             assert s[param] == results["choice"][name]["value"] and results["choice"][name]["set"] == "select"
     rows = results["candidates"]["rows"]

@@ -32,7 +32,7 @@ torch.set_num_threads(1)
 threadpool_limits(1)
 
 from mdaug.classify import make_classifier, sigma_p_sweep  # noqa: E402
-from mdaug.cli.classify import SyntheticTrainSet  # noqa: E402
+from mdaug.cli.sweep import SyntheticTrainSet  # noqa: E402
 from mdaug.generator import Nuisance, SigmaPAugmenter, make_dataset  # noqa: E402
 
 

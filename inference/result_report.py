@@ -1,0 +1,62 @@
+"""The calibration's text report: fit, sampler, convergence and the posterior summary
+table with units (:meth:`~.result.CalibrationResult.report` calls :func:`report`)."""
+from __future__ import annotations
+
+import numpy as np
+
+SUMMARY_UNITS = {"Gamma": "rel.", "A": "m", "w": "rad/s", "C": "ratio", "phi": "rad", "offset": "bins",
+                 "carrier": "x sum Gamma", "noise_db": "dB", "sigma": "peak = 1"}
+"""Units of the summary table's rows (the stored units: metres, rad/s)."""
+
+
+def summary_unit(row: str) -> str:
+    """The unit of a summary row name such as ``A_a[0]``, ``phi_b[0]@1`` or ``noise_db@2``."""
+    base = row.split("[")[0].split("@")[0]
+    return SUMMARY_UNITS.get(base, SUMMARY_UNITS.get(base.split("_")[0], ""))
+
+
+def report(res, identified_ratio: float) -> str:
+    """Human-readable fit, convergence and posterior summary of ``res`` (parameters whose
+    posterior sd exceeds ``identified_ratio`` x the prior sd are listed as not identified)."""
+    import pandas as pd
+
+    d, f = res.diagnostics, res.fit
+    lines = [f"class {res.class_name}: {res.n_engines} engine(s), {res.n_measurements} measurement(s), "
+             f"{res.n_draws} posterior draws",
+             f"acquisition: {res.acquisition.describe()}; "
+             + (f"phases marginalised ({res.meta.get('likelihood', {}).get('likelihood', 'marginal')})"
+                if res.marginal else "phases fitted"),
+             f"fit ({f['algorithm']}, {len(f['starts_misfit'])} starts, {f['seconds']:.1f} s"
+             f"{', reused from the checkpoint' if d.get('fit_reused') else ''}): "
+             f"misfit {f['misfit']:.2f}, {f['n_agree']} start(s) agree, "
+             + (f"noise floor {np.round(f['sigma'], 1).tolist()} dB" if res.marginal else
+                f"noise sigma {np.round(f['sigma'], 4).tolist()}")]
+    lines += [f"  note: {n}" for n in f["notes"]]
+    if d.get("sampler") == "smc":
+        lines.append(f"SMC: {d['smc_n_particles']} particles, {d['smc_stages']} tempering stages, "
+                     f"{d['smc_n_evals']} evaluations ({d['seconds']:.1f} s), ESS {d['ess_min']:.0f}, "
+                     f"last acceptance {d['acceptance_mean']:.2f}, distinct particles "
+                     f"{d['smc_unique_share']:.0%}, log evidence {d['smc_log_z']:.2f}, modes known to the "
+                     f"jumps {d.get('smc_modes', 0)}")
+    else:
+        resumed = f", resumed at step {d['resumed_at']}" if d.get("resumed_at") else ""
+        lines.append(f"MCMC: {d['n_walkers']} walkers x {d['chain_steps']} steps ({d['seconds']:.1f} s{resumed}), "
+                     f"max tau {d['tau_max']:.0f} steps, chain/tau {d['steps_over_tau']:.1f}, "
+                     f"min ESS {d['ess_min']:.0f}, acceptance {d['acceptance_mean']:.2f}, "
+                     f"burn {d['burn']}, thin {d['thin']}")
+    lines.append(("converged: " if res.converged else "WARNING: ") + d["reason"])
+    if d.get("weak_engines"):
+        lines.append(f"WARNING: engine(s) {d['weak_engines']} stay near their prior (too weak to identify)")
+    unid = [k for k, v in d["identified"].items() if not v]
+    if unid:
+        lines.append(f"not identified (posterior sd > {identified_ratio} x prior sd): {', '.join(unid)}")
+    if res.comparison:
+        lines.append("engine-count comparison (LOO):")
+        lines.append(pd.DataFrame(res.comparison).to_string(index=False))
+    table = res.summary()[["mean", "sd", "q05", "q95", "sd_ratio", "identified"]]
+    table.insert(0, "unit", [summary_unit(n) for n in table.index])
+    with pd.option_context("display.width", 140, "display.max_rows", 500):
+        lines.append(table.to_string(float_format=lambda v: f"{v:.4g}"))
+    lines.append("units: m (amplitudes A), rad/s (angular frequencies w; f = w / 2 pi), rad (phases), "
+                 "ratio (C, carrier x sum Gamma), bins (FFT bins), dB; sd_ratio: posterior sd / prior sd")
+    return "\n".join(lines)
