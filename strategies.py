@@ -10,6 +10,8 @@ name to how it makes its training set, used by the study (:mod:`mdaug.reports.jo
 * ``posterior``: draws from the calibrated posterior, same acquisition;
 * ``posterior_specimens``: posterior draws widened by the specimen model (its setting
   ``width``; width 0 = the posterior itself);
+* ``population``: new drones from the class's calibrated population (a population
+  file per class in ``spec.posteriors``; :mod:`mdaug.inference.population`);
 * ``tsaug``: tsaug on the measured profiles (:mod:`mdaug.classify.tsaug_baseline`).
 
 A strategy at one setting is a :class:`TrainingSpec` (frozen). A row of the table is
@@ -171,6 +173,21 @@ class PosteriorDraws(Strategy):
         return PosteriorSource(calibration, label=cls)
 
 
+class PopulationDraws(Strategy):
+    """New drones drawn from the class's calibrated population (a population file per
+    class, :class:`~mdaug.inference.population_augment.PopulationSource`)."""
+
+    def vectors(self, spec, cls, calibration):
+        from .inference.population_augment import PopulationSource
+
+        return PopulationSource(calibration, label=cls)
+
+    def load(self, path, cls: str):
+        from .inference.population_augment import load_population
+
+        return load_population(path, cls)
+
+
 class TsaugCopies(Strategy):
     """tsaug on the measured profiles (``spec.profiles``, ``spec.labels``)."""
 
@@ -202,6 +219,10 @@ STRATEGIES = {s.name: s for s in (
         "posterior_specimens", "posterior draws widened by the specimen model (common motor-speed factor, "
         "amplitude spread), through the measured acquisition; assumes new drones differ from the calibrated one "
         "as drones of one model do", parameter="width", calibrated=True),
+    PopulationDraws(
+        "population", "new drones drawn from the class's population (spreads across the calibrated drones; from "
+        "one drone, the specimen model's stated prior), through the drones' acquisition; assumes new drones differ "
+        "as the drones measured differ", calibrated=True),
     TsaugCopies(
         "tsaug", "tsaug (drift, pool, reverse) on the calibration measurements; assumes new drones look like "
         "distorted copies of the measured ones"),

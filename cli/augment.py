@@ -2,7 +2,8 @@
 
 Sources of class vectors: sigma_P around the packaged references (``--classes``),
 sigma_P around a calibration's best fit (``--fit CLASS=post.nc``), posterior draws
-(``--posterior CLASS=post.nc``); any of them widened by the specimen model
+(``--posterior CLASS=post.nc``), new drones from a population (``--population
+CLASS=pop.npz``); any of them widened by the specimen model
 (``--specimen-width``). They are rendered under the acquisition (the calibration's
 by default, with the carrier and noise it measured; options in
 :func:`.common.add_acquisition_options`), by the fast path or through the scene
@@ -36,12 +37,14 @@ def augmenters_from_args(args) -> tuple[list, dict | None, list[str]]:
     from ..inference.posterior_augment import load_posterior
     from ..strategies import STRATEGIES, TrainingSpec, augmenter
 
-    fits, posts = args.fit or [], args.posterior or []
-    names = [c for c, _ in fits + posts]
+    fits, posts, pops = args.fit or [], args.posterior or [], args.population or []
+    names = [c for c, _ in fits + posts + pops]
     if len(set(names)) != len(names):
-        raise ValueError(f"--fit/--posterior name a class twice: {names}")
+        raise ValueError(f"--fit/--posterior/--population name a class twice: {names}")
     if names and args.classes is not None:
-        raise ValueError("--fit/--posterior give the classes; drop --classes")
+        raise ValueError("--fit/--posterior/--population give the classes; drop --classes")
+    if pops and args.sigma_p is not None and not fits:
+        raise ValueError("--sigma-p applies to sigma_P sources (--classes or --fit), not to --population")
     if posts and args.sigma_p is not None and not fits:
         raise ValueError("--sigma-p applies to sigma_P sources (--classes or --fit), not to --posterior")
     sigma_p = DEFAULT_SIGMA_P if args.sigma_p is None else args.sigma_p
@@ -62,9 +65,19 @@ def augmenters_from_args(args) -> tuple[list, dict | None, list[str]]:
             # sigma_p_fit perturbs the phases only when asked (--phases relative), as in the study
             s = spec("sigma_p_fit", args.phases == "relative") if (cls, path) in fits else spec("posterior", None)
             augs.append(augmenter(s, cls, calibration=post, acquisition=acq))
-        extra = {"strategy": "+".join(sorted({STRATEGIES["sigma_p_fit" if f in fits else "posterior"].label
-                                              for f in fits + posts})),
-                 "posteriors": {c: str(p) for c, p in fits + posts}}
+        for cls, path in pops:
+            pop = STRATEGIES["population"].load(path, cls)
+            if not pop.converged or not all(pop.meta["drones_converged"]):
+                warnings.append(f"population of {cls} ({path}) was built from unconverged calibrations "
+                                "(see mdaug calibrate's report); its spreads may be too wide")
+            if pop.assumed:
+                warnings.append(f"population of {cls} ({path}) is of one drone: its spreads are assumed (the stated "
+                                "prior), not measured")
+            acq, _ = acquisition_from_args(args, pop.measured_acquisition())
+            augs.append(augmenter(spec("population", None), cls, calibration=pop, acquisition=acq))
+        kinds = ["sigma_p_fit" if f in fits else "posterior" for f in fits + posts] + ["population"] * len(pops)
+        extra = {"strategy": "+".join(sorted({STRATEGIES[k].label for k in kinds})),
+                 "posteriors": {c: str(p) for c, p in fits + posts + pops}}
     else:
         acq, perturb = acquisition_from_args(args)
         classes = list(DEFAULT_CLASSES) if args.classes is None else args.classes
@@ -97,7 +110,7 @@ def run_augment(args) -> int:
     from ..radar.progress import progress_enabled
     from .guard import Output, check_paths
 
-    check_paths(inputs=[(f"--{opt} {cls}=", path) for opt in ("fit", "posterior")
+    check_paths(inputs=[(f"--{opt} {cls}=", path) for opt in ("fit", "posterior", "population")
                         for cls, path in (getattr(args, opt) or [])],
                 outputs=[Output("--out", args.out, "npz"), Output("--plot", args.plot, "plot")])
     augmenters, extra, warnings = augmenters_from_args(args)
@@ -151,6 +164,9 @@ def add_augment(sub, parents, help):
                         "redrawn (truncate) or kept (default: %(default)s)")
     g.add_argument("--posterior", type=posterior_arg, action="append", default=None, metavar="CLASS=FILE",
                    help="draw from a calibrated posterior NetCDF; repeat per class (default: none)")
+    g.add_argument("--population", type=posterior_arg, action="append", default=None, metavar="CLASS=FILE",
+                   help="new drones from a class's population NPZ (mdaug calibrate --population); repeat per "
+                        "class (default: none)")
     g.add_argument("--through-chain", action="store_true",
                    help="render each vector as a raw acquisition of the scene simulator processed by the radar "
                         "chain (MTI, angle integration, extraction), about 2 ms per profile at K = 32 (default: "

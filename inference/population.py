@@ -199,17 +199,14 @@ def sample_spreads(drones: list[DroneSummary], model: PopulationModel, hyperprio
 
     from .ensemble import estimate_tau
 
-    measured = np.any([d.mask for d in drones], axis=0)
-    if not measured.any():
-        raise ValueError("no drone identifies any parameter of the class (every posterior sd > "
-                         f"{IDENTIFIED_SD_RATIO} x its prior sd): the population has nothing to pool")
+    measured = np.any([d.mask for d in drones], axis=0)  # none: the spreads keep their prior
 
     def log_post(u):
         lp = hyperprior.log_density(u)
         ok = np.isfinite(lp) & np.all(u < 5.0, axis=-1)
         out = np.full(len(u), -np.inf)
         if ok.any():
-            out[ok] = lp[ok] + log_marginal(np.exp(u[ok]), drones, model, measured)[0]
+            out[ok] = lp[ok] + (log_marginal(np.exp(u[ok]), drones, model, measured)[0] if measured.any() else 0.0)
         return out
 
     u0 = np.log(hyperprior.sample(n_walkers, rng) + 1e-6)
@@ -229,7 +226,7 @@ def sample_spreads(drones: list[DroneSummary], model: PopulationModel, hyperprio
     u = sampler.get_chain(discard=burn, thin=thin, flat=True)
     spreads = np.exp(u)
     mu = np.empty((len(u), int(measured.sum())))
-    for s in range(0, len(u), 512):  # mu | spreads ~ N(mu_hat, P^-1)
+    for s in range(0, len(u) if measured.any() else 0, 512):  # mu | spreads ~ N(mu_hat, P^-1)
         _, mu_hat, P = log_marginal(spreads[s:s + 512], drones, model, measured)
         chol = np.linalg.cholesky(P)  # P = L L^T: mu = mu_hat + L^-T z
         z = rng.standard_normal(mu_hat.shape)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..generator.params import N_PARAMS
+from ..generator.params import IDX, N_PARAMS
 from ..generator.specimens import SpecimenSpread
 from ..radar.io import DataFileError, atomic_savez
 from ..radar.seeds import rng as as_rng
@@ -23,6 +23,8 @@ from .population import SPREADS, Hyperprior, PopulationModel, sample_spreads, su
 
 FORMAT = "mdaug-population-1"
 POOL_PER_DRONE = 1000  # posterior draws kept per drone (for coordinates no drone identifies)
+META_FIELDS = ("class_name", "n_engines", "specimens", "hyperprior", "acquisition", "priors", "drones_converged",
+               "diagnostics")
 ARRAYS = ("spreads", "mu", "measured", "pool", "pool_drone", "drone_means", "reference")
 
 
@@ -74,6 +76,7 @@ def calibrate_population(results, specimens=None, *, reference=None, hyperprior:
     means = np.array([model.transform(d.draws).mean(axis=0) for d in drones])
     meta = {"format": FORMAT, "class_name": cls, "n_engines": n_eng, "gamma0": gamma0,
             "specimens": specimens, "hyperprior": hyperprior.scales, "coords": model.names,
+            "priors": results[0].priors.to_dict(),
             "acquisition": _union_acquisition(results).to_dict(),
             "drones_converged": [bool(r.converged) for r in results],
             "identified": [d.mask.tolist() for d in drones],
@@ -166,12 +169,47 @@ class PopulationResult:
         return "\n".join(lines)
 
     # ---- new drones -------------------------------------------------------------------
+    def inside_prior(self, x: np.ndarray) -> np.ndarray:
+        """(n,) bool: class vectors x (n, 13E) inside the calibration prior's box (every
+        amplitude, w_a, w_b, C and Gamma ratio; the box keeps every line below the
+        profile window's edge)."""
+        from .priors import SHARED, Priors
+
+        pri = Priors.from_dict(self.meta["priors"])
+        e = np.asarray(x).reshape(len(x), self.n_engines, N_PARAMS)
+        ok = np.ones(len(x), bool)
+        for name in SHARED:
+            lo, hi = pri.bounds[name]
+            v = e[..., IDX[name]]
+            ok &= np.all((v >= lo) & (v <= hi), axis=1)
+        if self.n_engines > 1:
+            lo, hi = pri.bounds["lnG"]
+            with np.errstate(divide="ignore"):
+                g = np.log(e[:, 1:, IDX["Gamma"]] / e[:, :1, IDX["Gamma"]])
+            ok &= np.all((g >= lo) & (g <= hi), axis=1)
+        return ok
+
     def draw_drones(self, n: int, rng) -> np.ndarray:
         """n class vectors (n, 13E) of new drones: a hyper-posterior draw (spreads and
         mean drone; a drone's own posterior draw for coordinates no drone
-        identifies), then the specimen model with those spreads around it. Phases
-        are 0: the acquisition that renders the vectors draws them."""
+        identifies), then the specimen model with those spreads around it, kept when
+        inside the calibration prior (:meth:`inside_prior`; the population is
+        truncated to the physics the class allows), redrawn otherwise. Phases are 0:
+        the acquisition that renders the vectors draws them."""
         rng = as_rng(rng)
+        out = np.empty((n, self.n_engines * N_PARAMS))
+        todo = np.arange(n)
+        for _ in range(100):
+            x = self._draw(len(todo), rng)
+            ok = self.inside_prior(x)
+            out[todo[ok]] = x[ok]
+            todo = todo[~ok]
+            if not todo.size:
+                return out
+        raise ValueError(f"population of {self.class_name}: new drones keep falling outside the calibration prior "
+                         f"({todo.size} of {n} after 100 redraws); its spreads are far too wide for the class")
+
+    def _draw(self, n: int, rng) -> np.ndarray:
         a = self.arrays
         i = rng.integers(len(a["spreads"]), size=n)
         t = rng.integers(len(a["pool"]), size=n)
@@ -202,8 +240,12 @@ class PopulationResult:
             meta = json.loads(str(files.pop("meta")))
         except ValueError:
             raise DataFileError(f"{path}: field 'meta' is not JSON") from None
-        if meta.get("format") != FORMAT:
-            raise DataFileError(f"{path}: field 'meta' format {meta.get('format')!r}, expected {FORMAT!r}")
+        if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+            got = meta.get("format") if isinstance(meta, dict) else meta
+            raise DataFileError(f"{path}: field 'meta' format {got!r}, expected {FORMAT!r}")
+        gone = [k for k in META_FIELDS if k not in meta]
+        if gone:
+            raise DataFileError(f"{path}: field 'meta' lacks {gone}")
         res = cls({k: files[k] for k in ARRAYS}, meta)
         p, e13 = res.model.p, res.n_engines * N_PARAMS
         q = int(res.arrays["measured"].sum())

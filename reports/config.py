@@ -54,8 +54,10 @@ class SimulationConfig:
     """The embedded default scene (used when no measured files are given)."""
 
     ramps: int = 32                 # ramps per frame of every simulated acquisition (K)
-    n_calibration: int = 5          # acquisitions of the reference specimen per class, calibrated on
-    n_select: int = 24              # more of them per class, held out for the study's choices
+    calibration_drones: int = 1     # drones per class calibrated on: 1 = the reference drone itself (the
+    #                                 population's spreads then assumed); more = drones of the specimen model
+    n_calibration: int = 5          # acquisitions of each calibration drone, calibrated on
+    n_select: int = 24              # more of them per drone, held out for the study's choices
     n_new: dict[str, int] = field(default_factory=lambda: {"HELI": 44, "QUAD": 92})
     new_specimens: int = 3          # new drone specimens per class in the test campaign
     large_factor: int = 4           # a second, larger new-drone campaign for tighter intervals
@@ -189,7 +191,8 @@ class StudyConfig:
         if p.n_boot < 0:
             raise ValueError(f"{src}: protocol.n_boot must be >= 0")
         sim = self.simulation
-        for name in ("ramps", "n_calibration", "n_select", "new_specimens", "large_factor", "ceiling_per_class"):
+        for name in ("ramps", "calibration_drones", "n_calibration", "n_select", "new_specimens", "large_factor",
+                     "ceiling_per_class"):
             if getattr(sim, name) < 1:
                 raise ValueError(f"{src}: simulation.{name} must be >= 1")
         for cls, n in sim.n_new.items():

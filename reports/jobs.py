@@ -23,25 +23,40 @@ def _threads(n: int = 1) -> None:
 
 
 def calibrate_class(job: dict) -> dict:
-    """One class calibrated from its measurements (``profiles``) under ``acquisition``:
-    the posterior saved to ``out/posteriors/<cls>.nc``, its corner and trace plots to
+    """One class calibrated from its measurements (``profiles``, of the drones
+    ``drones``) under ``acquisition``: each drone on its own (the first drone's posterior
+    is the single-drone calibration the posterior strategies use, saved to
+    ``out/posteriors/<cls>.nc``, the others beside it as ``<cls>.drone-<id>.nc``), then
+    the class's population over the drones (``<cls>.population.npz``; from one drone
+    its spreads are the stated prior); corner and trace plots of the first drone in
     ``out/figures/``; returns the stage's summary (plain data)."""
     from pathlib import Path
 
     from ..inference import calibrate
+    from ..inference.population_result import calibrate_population
     from ..inference.priors import engine_lines
+    from ..radar.seeds import child_seed
     from .style import figure_style
 
     _threads(job.get("threads", 1))
     t0 = time.perf_counter()
     cls, out, X = job["cls"], Path(job["out"]), job["profiles"]
-    checkpoint = out / "posteriors" / f"{cls}.chain.h5"
-    res = calibrate(X, cls, acquisition=job["acquisition"], settings=job["settings"], random_state=job["seed"],
-                    backend_path=checkpoint)
-    nc = out / "posteriors" / f"{cls}.nc"
-    res.save(nc)
-    for f in checkpoint.parent.glob(checkpoint.name + "*"):
-        f.unlink()  # only needed to resume an interrupted run
+    drones = np.asarray(job.get("drones", np.full(len(X), "0"))).astype(str)
+    ids = list(dict.fromkeys(drones.tolist()))
+    results = []
+    for k, drone in enumerate(ids):
+        name = cls if k == 0 else f"{cls}.drone-{drone}"
+        checkpoint = out / "posteriors" / f"{name}.chain.h5"
+        seed = job["seed"] if k == 0 else child_seed(job["seed"], "drone", drone)
+        res = calibrate(X[drones == drone], cls, acquisition=job["acquisition"], settings=job["settings"],
+                        random_state=seed, backend_path=checkpoint)
+        res.save(out / "posteriors" / f"{name}.nc")
+        for f in checkpoint.parent.glob(checkpoint.name + "*"):
+            f.unlink()  # only needed to resume an interrupted run
+        results.append(res)
+    res, nc = results[0], out / "posteriors" / f"{cls}.nc"
+    pop = calibrate_population(results, ids, random_state=child_seed(job["seed"], "population"))
+    pop_path = pop.save(out / "posteriors" / f"{cls}.population.npz")
     corner_png, trace_png = out / "figures" / f"corner_{cls}.png", out / "figures" / f"trace_{cls}.png"
     with figure_style():
         res.plot_corner(corner_png)
@@ -50,11 +65,14 @@ def calibrate_class(job: dict) -> dict:
     w_ref, _, _ = engine_lines(res.priors.centres)
     return {"posterior": str(nc), "corner": str(corner_png), "trace": str(trace_png),
             "converged": bool(res.converged), "diagnostics": res.diagnostics, "summary": res.summary(),
-            "n_profiles": int(len(X)), "acquisition": res.acquisition.to_dict(),
+            "n_profiles": int(np.sum(drones == ids[0])), "acquisition": res.acquisition.to_dict(),
             "measured_acquisition": res.measured_acquisition().to_dict(),
             "lines": {"frequency_q": np.quantile(lines[..., 0], [0.05, 0.5, 0.95], axis=0).tolist(),
                       "amplitude_q": np.quantile(lines[..., 1], [0.05, 0.5, 0.95], axis=0).tolist(),
                       "reference_frequency": np.sort(w_ref, axis=-1).tolist()},
+            "population": str(pop_path), "population_report": pop.report(), "population_spreads": pop.summary(),
+            "population_assumed": bool(pop.assumed), "population_converged": bool(pop.converged),
+            "drones": ids, "drones_converged": [bool(r.converged) for r in results],
             "seconds": time.perf_counter() - t0}
 
 

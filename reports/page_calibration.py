@@ -1,7 +1,7 @@
 """The report's "Calibration" section: per class, convergence, the sampler, SBC, the
 label-free posterior of the vibration lines (figure and numbers), the acquisition as
 measured against as stated (far-outside levels flagged, :func:`.verdicts.nuisances`),
-the corner and trace plots."""
+the population across drones (measured or assumed), the corner and trace plots."""
 from __future__ import annotations
 
 import html
@@ -73,6 +73,31 @@ def _acquisition_compare(cls: str, cal: dict, w: Html) -> str:
     return "<p class='note'>What the calibration measured of the acquisition: " + "; ".join(bits) + ".</p>"
 
 
+def _population(cls: str, c: dict, w: Html) -> str:
+    """The class's population: each spread across drones, measured against assumed."""
+    rows = c.get("population_spreads")
+    if not rows:
+        return ""
+    drones = c.get("drones") or ["0"]
+    bad = [d for d, ok in zip(drones, c.get("drones_converged") or []) if not ok]
+    if c.get("population_assumed"):
+        head = (f"From one drone the spreads across drones are not measured: the <code>population</code> strategy "
+                f"{w.warn('assumes')} them (the specimen model's stated physical guesses, as a half-normal prior).")
+    else:
+        head = (f"Calibrated from {fmt(len(drones))} drones ({w.esc(', '.join(map(str, drones)))}): each spread "
+                "across drones, its prior (assumed) against its posterior (measured where the drones moved it).")
+    if bad:
+        head += " " + w.warn(f"Drone calibration(s) not converged ({', '.join(map(str, bad))}): a drone posterior "
+                             "that is too narrow or off its truth makes the spreads absorb the offset.")
+    cells = [[td(x["spread"]), td(f"{fmt(x['prior_median'], 3)} <span class='ci'>[{fmt(x['prior_q05'], 3)}, "
+                                  f"{fmt(x['prior_q95'], 3)}]</span>"),
+              td(f"{fmt(x['median'], 3)} <span class='ci'>[{fmt(x['q05'], 3)}, {fmt(x['q95'], 3)}]</span>"),
+              td(x["status"])] for x in rows]
+    return (f"<p class='note'><b>Population of {w.esc(cls)}</b>: {head}</p>"
+            + table(["spread (relative)", "prior: median [5%, 95%]", "posterior: median [5%, 95%]", "status"],
+                    cells))
+
+
 def calibration_section(r: dict, figs: Figures, w: Html, report_dir: Path) -> str:
     out = ["<p class='note'>Each class is calibrated on its few measurements under the campaign's acquisition "
            "(phases marginalised). A vibration model is a sum of four lines per engine; which line is the roll, "
@@ -104,6 +129,7 @@ def calibration_section(r: dict, figs: Figures, w: Html, report_dir: Path) -> st
                                   f"against amplitude in mm, medians with 5-95% intervals, and the class reference's "
                                   "line frequencies"))
         out.append(_acquisition_compare(cls, c, w))
+        out.append(_population(cls, c, w))
         unid = [p for p, ok in (d.get("identified") or {}).items() if not ok]
         body = _lines_table(c)
         if unid:

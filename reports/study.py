@@ -80,10 +80,12 @@ class Study(TrainingStages):
         def compute():
             sets, acq = self._simulated_sets() if self.cfg.simulated else self._file_sets()
             index = {"sets": {}, "acquisition": acq.to_dict()}
-            for name, (X, y) in sets.items():
+            for name, (X, y, *drones) in sets.items():
                 path = self.out / "data" / f"{name}.npz"
+                extra = {"specimen": np.asarray(drones[0]).astype(str)} if drones else {}
                 atomic_savez(path, profiles=np.asarray(X, dtype=np.float64), labels=np.asarray(y).astype(str),
-                             ramps_per_frame=np.array(acq.ramps), acquisition=np.array(json.dumps(acq.to_dict())))
+                             ramps_per_frame=np.array(acq.ramps), acquisition=np.array(json.dumps(acq.to_dict())),
+                             **extra)
                 index["sets"][name] = {"path": str(path), "n": int(len(y)),
                                        "per_class": {c: int(np.sum(np.asarray(y) == c)) for c in self.cfg.classes}}
             return index
@@ -98,7 +100,7 @@ class Study(TrainingStages):
             for cls, path in getattr(self.cfg.data, group).items():
                 ps = load_profiles(path)
                 X = ps.select(cls)
-                sets[fmt.format(cls)] = (X, np.full(len(X), cls))
+                sets[fmt.format(cls)] = (X, np.full(len(X), cls), ps.specimens(cls))
                 acqs.append((path, acquisition_from_file(ps.extra, path)))
         if self.cfg.data.select:
             parts = [sets.pop(f"select_{c}") for c in self.cfg.classes]
@@ -128,10 +130,13 @@ class Study(TrainingStages):
         reference = scene.replace(specimens=SpecimenSpread.exact())
         sets, select, new, large = {}, {}, {}, {}
         for cls in self.cfg.classes:
-            camp = simulate_campaign(cls, 1, sim.n_calibration + sim.n_select, _stage_seed(self.cfg, "reference", cls),
-                                     scene=reference)
-            sets[f"calibration_{cls}"] = (camp.profiles[: sim.n_calibration], camp.labels[: sim.n_calibration])
-            select[cls] = (camp.profiles[sim.n_calibration:], camp.labels[sim.n_calibration:])
+            d = sim.calibration_drones  # 1: the reference drone itself; more: drones of the specimen model
+            camp = simulate_campaign(cls, d, d * (sim.n_calibration + sim.n_select),
+                                     _stage_seed(self.cfg, "reference", cls), scene=reference if d == 1 else scene)
+            first = np.concatenate([np.flatnonzero(camp.specimen == k)[: sim.n_calibration] for k in range(d)])
+            rest = np.setdiff1d(np.arange(len(camp)), first)
+            sets[f"calibration_{cls}"] = (camp.profiles[first], camp.labels[first], camp.specimen[first])
+            select[cls] = (camp.profiles[rest], camp.labels[rest], camp.specimen[rest])
             n = sim.n_new.get(cls, 44)
             camp = simulate_campaign(cls, sim.new_specimens, n, _stage_seed(self.cfg, "new", cls), scene=scene)
             new[cls] = (camp.profiles, camp.labels)
@@ -141,7 +146,7 @@ class Study(TrainingStages):
                 large[cls] = (camp.profiles, camp.labels)
 
         def cat(parts):
-            return (np.concatenate([p[0] for p in parts.values()]), np.concatenate([p[1] for p in parts.values()]))
+            return tuple(np.concatenate([p[i] for p in parts.values()]) for i in range(len(next(iter(parts.values())))))
 
         sets["select"], sets["new"] = cat(select), cat(new)
         if large:
@@ -151,6 +156,10 @@ class Study(TrainingStages):
     def load_set(self, name: str):
         ps = load_profiles(self.out / "data" / f"{name}.npz")
         return ps.profiles, ps.labels
+
+    def load_drones(self, name: str, cls: str) -> np.ndarray:
+        """The drone id of each profile of class ``cls`` in a stored set ("0" when unknown)."""
+        return load_profiles(self.out / "data" / f"{name}.npz").specimens(cls)
 
     def acquisition(self, index: dict):
         from ..generator.acquisition import Acquisition
@@ -179,7 +188,8 @@ class Study(TrainingStages):
                                 fit_budget=p.calibration_fit_budget, n_acquisitions=p.calibration_draws,
                                 ramps_drawn=p.calibration_ramps_drawn, max_steps=p.calibration_max_steps,
                                 check_every=min(base.check_every, p.calibration_max_steps))
-        return {"cls": cls, "profiles": self.load_set(f"calibration_{cls}")[0], "acquisition": acquisition,
+        return {"cls": cls, "profiles": self.load_set(f"calibration_{cls}")[0],
+                "drones": self.load_drones(f"calibration_{cls}", cls), "acquisition": acquisition,
                 "settings": settings, "seed": _stage_seed(self.cfg, "calibrate", cls), "out": str(self.out)}
 
     def calibrate(self, cls: str, acquisition) -> dict:
@@ -200,6 +210,7 @@ class Study(TrainingStages):
         """{strategy: [spec, ...]}: every strategy at every value of its setting (the
         published one rendered as the published single chirp, never through the chain)."""
         p = self.cfg.protocol
+        files = {"population": {c: calib[c]["population"] for c in self.cfg.classes}}
         posts = {c: calib[c]["posterior"] for c in self.cfg.classes}
         out = {}
         for name in p.strategies:
@@ -209,7 +220,7 @@ class Study(TrainingStages):
                                           labels=tsaug_sources[1])]
                 continue
             values = {"sigma_p": p.sigma_p, "width": p.specimen_widths, None: (None,)}[s.parameter]
-            out[name] = [TrainingSpec(name, posteriors=posts, normalisation=p.normalisation,
+            out[name] = [TrainingSpec(name, posteriors=files.get(name, posts), normalisation=p.normalisation,
                                       through_chain=bool(p.through_chain and s.study_chain),
                                       **({} if s.parameter is None else {s.parameter: float(v)}))
                          for v in values]

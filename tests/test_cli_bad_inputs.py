@@ -182,7 +182,7 @@ CASES = [
      ["nowhere.nc: posterior file not found"]),
     ("aug-posterior-garbage", [*AUG, "--posterior", "HELI={d}/garbage.nc"], ["garbage.nc: not a NetCDF posterior"]),
     ("aug-posterior-twice", [*AUG, "--posterior", "HELI={d}/a.nc", "--posterior", "heli={d}/b.nc"],
-     ["--fit/--posterior name a class twice"]),
+     ["--fit/--posterior/--population name a class twice"]),
     ("aug-posterior-and-sigma", [*AUG, "--posterior", "HELI={d}/garbage.nc", "--sigma-p", "0.1"],
      ["--sigma-p applies to sigma_P sources", "not to --posterior"]),
     # ---- simulate ----

@@ -90,7 +90,9 @@ def _result(model, x0, n_drones=3, seed=3):
     fit = sample_spreads(drones, model, Hyperprior(), rng, max_steps=3000)
     from mdaug.generator.acquisition import Acquisition
     pool = np.concatenate([d.draws for d in drones])
+    from mdaug.inference.priors import Priors
     meta = {"format": "mdaug-population-1", "class_name": "HELI", "n_engines": 1, "gamma0": float(x0[0]),
+            "priors": Priors.from_reference(load_reference("HELI")).to_dict(),
             "specimens": [d.specimen for d in drones], "hyperprior": Hyperprior().scales, "coords": model.names,
             "acquisition": Acquisition.measured(4).to_dict(), "drones_converged": [True] * n_drones,
             "identified": [d.mask.tolist() for d in drones],
@@ -106,6 +108,7 @@ def test_new_drones_spread_around_the_class_mean(tmp_path):
     res = _result(model, x0)
     x = res.draw_drones(4000, np.random.default_rng(0))
     assert x.shape == (4000, 13) and np.all(np.isfinite(x))
+    assert np.all(res.inside_prior(x))  # truncated to the class's physics
     y = model.transform(x)
     freq = model.kinds == "frequency"
     # a new drone's frequencies move together (the common motor-speed factor)

@@ -1,0 +1,64 @@
+"""The population from the command line: drones in a file, calibrate --population,
+augment --population, and the errors that name file and field."""
+import json
+
+import numpy as np
+import pytest
+
+from mdaug.cli import main
+from mdaug.inference.population_result import PopulationResult
+
+FAST = ["--sampler", "laplace", "--starts", "1", "--fit-budget", "60", "--particles", "200", "--allow-unconverged"]
+
+
+@pytest.fixture(scope="module")
+def drones(tmp_path_factory):
+    d = tmp_path_factory.mktemp("drones")
+    assert main(["simulate", "--class", "HELI", "--specimens", "2", "--acquisitions", "4", "--ramps", "4",
+                 "--seed", "2", "--out", str(d / "d.npz")]) == 0
+    return d
+
+
+@pytest.mark.slow
+def test_calibrate_population_keeps_each_drone_and_reuses_it(drones, capsys):
+    out = drones / "pop.npz"
+    assert main(["calibrate", str(drones / "d.npz"), "--class", "HELI", "--population", *FAST,
+                 "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "population of HELI: 2 drone(s) (0, 1)" in text
+    pop = PopulationResult.load(out, class_name="HELI")
+    assert pop.n_drones == 2 and not pop.assumed
+    assert (drones / "pop.npz.drone-0.nc").is_file() and (drones / "pop.npz.drone-1.nc").is_file()
+    assert main(["calibrate", str(drones / "d.npz"), "--class", "HELI", "--population", *FAST,
+                 "--out", str(out)]) == 0
+    again = capsys.readouterr().out
+    assert "drone 0: reused" in again and "drone 1: reused" in again and "calibrating from" not in again
+
+    aug = drones / "set.npz"
+    assert main(["augment", "--population", f"HELI={out}", "--n-per-class", "50", "--out", str(aug)]) == 0
+    with np.load(aug, allow_pickle=False) as z:
+        assert z["profiles"].shape == (50, 400)
+        settings = json.loads(str(z["settings"]))
+    assert settings["strategy"] == "population" and settings["posteriors"] == {"HELI": str(out)}
+
+
+@pytest.mark.slow
+def test_one_drone_is_calibrated_alone_with_specimen(drones, capsys):
+    out = drones / "one.nc"
+    assert main(["calibrate", str(drones / "d.npz"), "--class", "HELI", "--specimen", "1", *FAST,
+                 "--out", str(out)]) == 0
+    assert "calibrating HELI from 2 profile(s)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["calibrate", "{d}/d.npz", "--class", "HELI", "--specimen", "7", "--out", "{d}/x.nc"],
+     "d.npz: field 'specimen' holds no drone '7' of class HELI (drones present: ['0', '1'])"),
+    (["calibrate", "{d}/d.npz", "--class", "HELI", "--population", "--out", "{d}/x.nc"],
+     "--out"),
+    (["augment", "--population", "HELI={d}/d.npz", "--out", "{d}/y.npz"],
+     "d.npz: not a population file, missing field(s)"),
+])
+def test_bad_population_inputs_name_the_file_and_field(drones, argv, says, capsys):
+    assert main([a.format(d=drones) for a in argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and says in err[0], err
