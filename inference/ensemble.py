@@ -39,7 +39,7 @@ import numpy as np
 
 from ..radar.keys import cache_key
 from ..radar.seeds import rng as seeded_rng
-from .priors import wrap
+from ..generator.model import wrap_phase
 from .sampler_run import CalibrationInterrupted, SamplerRun, stop_on_sigint
 
 GROUP = "mcmc"
@@ -115,7 +115,7 @@ def make_moves(phase_cols, dim: int, relabel=None, p_relabel: float = 0.0):
         def get_proposal(self, s, c, random):
             q, f = super().get_proposal(s, c, random)
             if cols.size:
-                q[:, cols] = wrap(q[:, cols])
+                q[:, cols] = wrap_phase(q[:, cols])
             return q, f
 
     g_default = 2.38 / np.sqrt(2 * dim)
@@ -168,7 +168,7 @@ def initial_ball(layout, theta_best: np.ndarray, log_post, n_walkers: int, scale
         th = theta_best + scale * rng.standard_normal((n_walkers, layout.dim))
         th[:, box] = lo[box] + np.abs(th[:, box] - lo[box])
         th[:, box] = hi[box] - np.abs(hi[box] - th[:, box])
-        th[:, layout.phase_cols] = wrap(th[:, layout.phase_cols])
+        th[:, layout.phase_cols] = wrap_phase(th[:, layout.phase_cols])
         th[:, : layout.dim_z] = layout.canonical(th[:, : layout.dim_z])  # the mirror image: same density
         th = th[np.isfinite(log_post(th))]
         out = np.concatenate([out, th])[:n_walkers]

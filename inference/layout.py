@@ -22,7 +22,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..generator import IDX, N_PARAMS
-from .priors import PERMUTATIONS, PHASE_NAMES, SHARED, Priors, wrap
+from ..generator.model import wrap_phase
+from .priors import PERMUTATIONS, PHASE_NAMES, SHARED, Priors
 
 DEFAULT_SIGMA_BOUNDS = (1e-4, 1.0)
 DEFAULT_NOISE_DB = (-80.0, -10.0)
@@ -132,7 +133,7 @@ class Layout:
         z = theta[:, : self.dim_z].copy()
         cols = self.phase_cols
         if cols.size:
-            z[:, cols] = wrap(z[:, cols])
+            z[:, cols] = wrap_phase(z[:, cols])
         return z, theta[:, self.dim_z:]
 
     # ---- physics -------------------------------------------------------------------
@@ -189,7 +190,7 @@ class Layout:
                 continue
             zm = np.empty(self.n_meas_z)
             for k in range(self.E):
-                zm[4 * k: 4 * k + 4] = wrap(x[m, k, [IDX[p] for p in PHASE_NAMES]])
+                zm[4 * k: 4 * k + 4] = wrap_phase(x[m, k, [IDX[p] for p in PHASE_NAMES]])
             if self.range_offset:
                 zm[4 * self.E] = 0.0 if extra is None else extra[m]
             z[self._z_meas(m)] = zm

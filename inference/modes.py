@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
-from .priors import wrap
+from ..generator.model import wrap_phase
 
 DOF = 5.0  # Student-t degrees of freedom of a component (heavy tails cover a mode's skew)
 INFLATE = 1.5  # component scale over the Laplace scale
@@ -119,7 +119,7 @@ class ModeMixture:
                 got = np.concatenate([got, y[self._inside(y)]])
             out[idx] = self.means[k] + got[: idx.size]
         if self.phase_cols.size:
-            out[:, self.phase_cols] = wrap(out[:, self.phase_cols])
+            out[:, self.phase_cols] = wrap_phase(out[:, self.phase_cols])
         return out
 
     def logpdf(self, theta: np.ndarray) -> np.ndarray:
@@ -132,7 +132,7 @@ class ModeMixture:
                            - np.log(np.diagonal(self.chols, axis1=1, axis2=2)).sum(axis=1) - self.log_mass)
         y = theta[None] - self.means[:, None]  # (K, n, d)
         if self.phase_cols.size:
-            y[..., self.phase_cols] = wrap(y[..., self.phase_cols])
+            y[..., self.phase_cols] = wrap_phase(y[..., self.phase_cols])
         sol = np.einsum("kij,knj->kni", self._inv, y)
         logs = self._const[:, None] - 0.5 * (DOF + d) * np.log1p(np.sum(sol * sol, axis=2) / DOF)
         return special.logsumexp(logs, axis=0) - np.log(len(self.means))
@@ -151,7 +151,7 @@ def merge_modes(thetas: np.ndarray, values: np.ndarray, width: np.ndarray, phase
         for j in keep:
             diff = thetas[i] - thetas[j]
             if cols.size:
-                diff[cols] = wrap(diff[cols])
+                diff[cols] = wrap_phase(diff[cols])
             if np.max(np.abs(diff) / width) < SAME_MODE:
                 ok = False
                 break

@@ -25,7 +25,7 @@ from ..generator.augment import ModelAugmenter, Renderer, SpecimenSource, Vector
 from ..generator.params import NONNEGATIVE, N_PARAMS, PHASES
 from ..generator.specimens import SpecimenSpread
 from ..radar import RadarConfig
-from .priors import wrap
+from ..generator.model import wrap_phase
 from .result import CalibrationResult, circular_stats
 
 
@@ -62,7 +62,7 @@ class PosteriorSource(VectorSource):
     def draw(self, n: int, rng: np.random.Generator) -> np.ndarray:
         idx = rng.integers(len(self._pool), size=n)
         x = self._pool[idx] + self.jitter * self._sd * rng.standard_normal((n, self._pool.shape[1]))
-        x[:, self._phase_cols] = wrap(x[:, self._phase_cols])
+        x[:, self._phase_cols] = wrap_phase(x[:, self._phase_cols])
         x[:, self._nonneg] = np.abs(x[:, self._nonneg])
         return x
 

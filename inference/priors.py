@@ -175,8 +175,3 @@ def align_lines(x: np.ndarray, reference: np.ndarray) -> np.ndarray:
     for j, r in ((2, "p"), (3, "m")):
         out[..., IDX[f"A_{r}"]], out[..., IDX[f"phi_{r}"]] = a2[..., j], ph2[..., j]
     return out.reshape(n, e * N_PARAMS)
-
-
-def wrap(phi):
-    """Phases to [-pi, pi)."""
-    return (np.asarray(phi) + np.pi) % TWO_PI - np.pi

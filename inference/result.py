@@ -30,7 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from ..generator import IDX, N_PARAMS, PARAM_NAMES
-from .priors import PHASE_NAMES, SHARED, Priors, engine_lines, wrap
+from ..generator.model import wrap_phase
+from .priors import PHASE_NAMES, SHARED, Priors, engine_lines
 
 FORMAT = "mdaug-posterior-2"
 READABLE_FORMATS = ("mdaug-posterior-1", FORMAT)
@@ -51,7 +52,7 @@ def circular_stats(phi: np.ndarray, q=(0.05, 0.95)) -> dict:
     c, s = np.mean(np.cos(phi)), np.mean(np.sin(phi))
     r = float(np.hypot(c, s))
     mu = float(np.arctan2(s, c))
-    centred = wrap(phi - mu)
+    centred = wrap_phase(phi - mu)
     lo, hi = np.quantile(centred, q) + mu
     return {"mean": mu, "sd": float(np.sqrt(-2 * np.log(max(r, 1e-12)))), "R": r, "q05": float(lo), "q95": float(hi)}
 
@@ -300,7 +301,7 @@ class CalibrationResult:
             for name in (PHASE_NAMES if not self.marginal else ()):
                 v = self._var(name)[:, 0, k]
                 mu = circular_stats(v)["mean"]
-                cols.append(wrap(v - mu) + mu)  # unwrapped around the circular mean
+                cols.append(wrap_phase(v - mu) + mu)  # unwrapped around the circular mean
                 names.append(f"{name}[{k}]")
         return np.column_stack(cols), names
 

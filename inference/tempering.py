@@ -51,7 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from ..radar.seeds import rng as seeded_rng
-from .priors import wrap
+from ..generator.model import wrap_phase
 from .sampler_run import CalibrationInterrupted, SamplerRun, stop_on_sigint
 
 GAMMA_MIX = ((0.25, 0.5), (1.0, 0.4), (None, 0.1))  # (factor of 2.38/sqrt(2 dim) or None = 1.0, weight)
@@ -144,7 +144,7 @@ def de_sweep(theta, ll, lprior, beta, target, rng, phase_cols=(), bounds=None, p
         gamma = np.array([g0 * f if f else 1.0 for f, _ in GAMMA_MIX])[choice]
         diff = theta[j] - theta[k]
         if cols.size:
-            diff[:, cols] = wrap(diff[:, cols])
+            diff[:, cols] = wrap_phase(diff[:, cols])
         scale = theta[other].std(axis=0) + 1e-300
         prop = theta[move] + gamma[:, None] * diff + JITTER * scale * rng.standard_normal((m, dim))
         if bounds is not None and p_redraw > 0:
@@ -161,7 +161,7 @@ def de_sweep(theta, ll, lprior, beta, target, rng, phase_cols=(), bounds=None, p
         if swap.any():
             prop[swap], log_jac[swap] = relabel(theta[move[swap]], rng)
         if cols.size:
-            prop[:, cols] = wrap(prop[:, cols])
+            prop[:, cols] = wrap_phase(prop[:, cols])
         lp_new, ll_new = target(prop)
         with np.errstate(invalid="ignore"):
             log_a = (lp_new + beta * np.where(np.isfinite(lp_new), ll_new, 0.0)) - (lprior[move] + beta * ll[move])

@@ -65,12 +65,9 @@ class ProfileSet:
         return self
 
     def specimens(self, label: str) -> np.ndarray:
-        """The drone (specimen) id of each profile of class ``label`` (n,), as strings:
-        the file's ``specimen`` field, or one drone ``"0"`` when the file has none."""
-        n = int(np.sum(self.labels == label))
-        if "specimen" not in self.extra:
-            return np.full(n, "0")
-        return np.asarray(self.extra["specimen"])[self.labels == label].astype(str)
+        """Drone id (strings) of each profile of class ``label`` (n,): the ``specimen`` field, else "0"."""
+        ids = self.extra.get("specimen", np.zeros(len(self.labels), int))
+        return np.asarray(ids)[self.labels == label].astype(str)
 
     def select(self, label: str) -> np.ndarray:
         """Profiles (n, L) of one class; error naming the file when absent."""

@@ -136,7 +136,6 @@ def strategies_section(r: dict, j: dict, figs: Figures, w: Html) -> str:
     test = j["test"]
     if test is None:
         return "<p>No test set.</p>"
-    classes = list(r["config"]["classes"])
     names = chosen(j)
     out = [figs.embed("strategies", figures.strategies_figure(r, test, names, ceiling_line(r, j, test)),
                       f"Balanced accuracy and per-class recall with 95% intervals of every strategy's CNN on the "
