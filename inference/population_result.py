@@ -157,7 +157,7 @@ class PopulationResult:
                 f"({self.meta['diagnostics']['steps']} steps, max tau "
                 f"{max(self.meta['diagnostics']['tau']):.0f})")
         bad = [s for s, ok in zip(self.meta["specimens"], self.meta["drones_converged"]) if not ok]
-        if bad:
+        if bad and not self.assumed:
             head += (f"\n  drone calibration(s) NOT converged: {', '.join(bad)}; a drone posterior that is too narrow or "
                      "off its truth makes the spreads absorb the offset (read them as upper bounds)")
         if self.assumed:

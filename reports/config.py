@@ -55,9 +55,11 @@ class SimulationConfig:
 
     ramps: int = 32                 # ramps per frame of every simulated acquisition (K)
     calibration_drones: int = 1     # drones per class calibrated on: 1 = the reference drone itself (the
-    #                                 population's spreads then assumed); more = drones of the specimen model
+    #                                 population's spreads then assumed); more = drones of the specimen model,
+    #                                 and one more drone, held out whole, that the choices are made on
     n_calibration: int = 5          # acquisitions of each calibration drone, calibrated on
-    n_select: int = 24              # more of them per drone, held out for the study's choices
+    n_select: int = 24              # more acquisitions per drone held out for the choices (the held-out
+    #                                 drone: n_calibration + n_select acquisitions)
     n_new: dict[str, int] = field(default_factory=lambda: {"HELI": 44, "QUAD": 92})
     new_specimens: int = 3          # new drone specimens per class in the test campaign
     large_factor: int = 4           # a second, larger new-drone campaign for tighter intervals

@@ -86,7 +86,7 @@ def _population(cls: str, c: dict, w: Html) -> str:
     else:
         head = (f"Calibrated from {fmt(len(drones))} drones ({w.esc(', '.join(map(str, drones)))}): each spread "
                 "across drones, its prior (assumed) against its posterior (measured where the drones moved it).")
-    if bad:
+    if bad and not c.get("population_assumed"):
         head += " " + w.warn(f"Drone calibration(s) not converged ({', '.join(map(str, bad))}): a drone posterior "
                              "that is too narrow or off its truth makes the spreads absorb the offset.")
     cells = [[td(x["spread"]), td(f"{fmt(x['prior_median'], 3)} <span class='ci'>[{fmt(x['prior_q05'], 3)}, "

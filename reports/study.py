@@ -130,11 +130,14 @@ class Study(TrainingStages):
         reference = scene.replace(specimens=SpecimenSpread.exact())
         sets, select, new, large = {}, {}, {}, {}
         for cls in self.cfg.classes:
-            d = sim.calibration_drones  # 1: the reference drone itself; more: drones of the specimen model
-            camp = simulate_campaign(cls, d, d * (sim.n_calibration + sim.n_select),
+            # 1 drone: the reference drone itself, its other acquisitions held out for the choices; more:
+            # drones of the specimen model and one drone more, held out whole (no strategy is calibrated on it)
+            d = sim.calibration_drones
+            n_drones = 1 if d == 1 else d + 1
+            camp = simulate_campaign(cls, n_drones, n_drones * (sim.n_calibration + sim.n_select),
                                      _stage_seed(self.cfg, "reference", cls), scene=reference if d == 1 else scene)
             first = np.concatenate([np.flatnonzero(camp.specimen == k)[: sim.n_calibration] for k in range(d)])
-            rest = np.setdiff1d(np.arange(len(camp)), first)
+            rest = np.setdiff1d(np.arange(len(camp)), first) if d == 1 else np.flatnonzero(camp.specimen == d)
             sets[f"calibration_{cls}"] = (camp.profiles[first], camp.labels[first], camp.specimen[first])
             select[cls] = (camp.profiles[rest], camp.labels[rest], camp.specimen[rest])
             n = sim.n_new.get(cls, 44)
@@ -169,6 +172,9 @@ class Study(TrainingStages):
     def selection_set(self, index: dict) -> tuple[str, tuple, str]:
         """(name, (X, y), what it is) of the set the study's choices are made on."""
         if "select" in index["sets"]:
+            if self.cfg.simulated and self.cfg.simulation.calibration_drones > 1:
+                return "select", self.load_set("select"), ("acquisitions of a drone no strategy was calibrated on "
+                                                           "(one fold of leave-one-drone-out)")
             return "select", self.load_set("select"), "held-out acquisitions of the calibration drones"
         parts = [self.load_set(f"calibration_{c}") for c in self.cfg.classes]
         return "calibration", (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])), \

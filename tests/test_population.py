@@ -169,3 +169,28 @@ def test_population_sbc_runs_and_resumes(tmp_path):
     again = run_population_sbc("HELI", 2, **kw)
     assert np.array_equal(again["all"]["ranks"], ranks)
     assert len(ck.read_text().splitlines()) == 2
+
+
+def test_study_data_keeps_each_calibration_drone(tmp_path):
+    """simulation.calibration_drones = 2: each drone's first n_calibration acquisitions
+    are calibrated on; the choices are made on a third drone no strategy is calibrated
+    on (one fold of leave-one-drone-out); the stored sets say which drone each profile
+    is of."""
+    import dataclasses
+
+    from mdaug.reports.config import StudyConfig
+    from mdaug.reports.study import Study
+
+    cfg = StudyConfig(seed=1, classes=("HELI",)).quick_version()
+    cfg = dataclasses.replace(cfg, simulation=dataclasses.replace(cfg.simulation, calibration_drones=2,
+                                                                  n_new={"HELI": 4}))
+    study = Study(cfg, tmp_path / "s", log=lambda *_: None)
+    study.data()
+    n_cal, n_sel = cfg.simulation.n_calibration, cfg.simulation.n_select
+    drones = study.load_drones("calibration_HELI", "HELI")
+    assert drones.tolist() == ["0"] * n_cal + ["1"] * n_cal
+    held = study.load_drones("select", "HELI")
+    assert held.tolist() == ["2"] * (n_cal + n_sel)
+    assert "no strategy was calibrated on" in study.selection_set(study.data())[2]
+    job = study._calibration_job("HELI", study.acquisition(study.data()))
+    assert job["drones"].tolist() == drones.tolist() and len(job["profiles"]) == 2 * n_cal
