@@ -170,17 +170,21 @@ def log_marginal(spreads: np.ndarray, drones: list[DroneSummary], model: Populat
     P = np.zeros((W, q, q))
     b = np.zeros((W, q))
     logl = np.zeros(W)
-    for d in drones:
-        idx = np.flatnonzero(d.mask)
-        c = d.cov[None] + sig[:, idx[:, None], idx[None, :]]
+    groups: dict[bytes, list[DroneSummary]] = {}
+    for d in drones:  # drones that identify the same coordinates are one batch
+        groups.setdefault(np.asarray(d.mask, bool).tobytes(), []).append(d)
+    for group in groups.values():
+        idx = np.flatnonzero(group[0].mask)
+        means = np.stack([d.mean for d in group])  # (G, k)
+        c = np.stack([d.cov for d in group])[None] + sig[:, None, idx[:, None], idx[None, :]]  # (W, G, k, k)
         chol = np.linalg.cholesky(c)
         cinv = np.linalg.inv(c)
-        cm = cinv @ d.mean
-        logl -= np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(-1) + 0.5 * cm @ d.mean \
-            + 0.5 * len(idx) * np.log(2 * np.pi)
+        cm = np.einsum("wgij,gj->wgi", cinv, means)
+        logl -= (np.log(np.diagonal(chol, axis1=-2, axis2=-1)).sum(-1) + 0.5 * np.einsum("wgi,gi->wg", cm, means)
+                 + 0.5 * len(idx) * np.log(2 * np.pi)).sum(-1)
         j = pos[idx]
-        P[:, j[:, None], j[None, :]] += cinv
-        b[:, j] += cm
+        P[:, j[:, None], j[None, :]] += cinv.sum(1)
+        b[:, j] += cm.sum(1)
     chol = np.linalg.cholesky(P)
     mu = np.linalg.solve(P, b[..., None])[..., 0]
     logl += 0.5 * np.einsum("wi,wi->w", b, mu) - np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(-1) \
