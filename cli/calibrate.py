@@ -159,6 +159,7 @@ def run_calibrate(args) -> int:
     else:
         res = calibrate(profiles, args.class_name.upper(), engines=args.engines, settings=settings,
                         acquisition=acquisition, random_state=args.seed, backend_path=backend)
+    res.record_specimens(drones)
     if res.diagnostics.get("resumed_at") or res.diagnostics.get("fit_reused"):
         result(f"resumed from {backend}: fit reused, sampler continued at step {res.diagnostics.get('resumed_at', 0)}")
     res.save(args.out)
@@ -218,7 +219,7 @@ def run_population(args, profiles, drones, settings, acquisition) -> int:
             info(f"drone {drone} ({k + 1} of {len(ids)}): calibrating from {len(rows)} profile(s)")
             res = calibrate(rows, cls, engines=args.engines, settings=settings, acquisition=acquisition,
                             random_state=child_seed(args.seed, "drone", drone),
-                            backend_path=Path(f"{path}.chain.h5"))
+                            backend_path=Path(f"{path}.chain.h5")).record_specimens([drone])
             res.save(path)
             Path(f"{path}.chain.h5").unlink(missing_ok=True)
             Path(f"{path}.chain.h5.fit.json").unlink(missing_ok=True)

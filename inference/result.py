@@ -187,6 +187,17 @@ class CalibrationResult:
         return self.meta["diagnostics"]
 
     @property
+    def specimens(self) -> list[str]:
+        """The drones (specimen ids) the measurements were of (["0"] when not recorded)."""
+        return [str(v) for v in self.meta.get("specimens", ["0"])]
+
+    def record_specimens(self, ids) -> "CalibrationResult":
+        """Record which drones the measurements were of (kept in the file)."""
+        self.meta["specimens"] = sorted({str(v) for v in ids})
+        self.idata.posterior.attrs["mdaug"] = json.dumps(self.meta)
+        return self
+
+    @property
     def fit(self) -> dict:
         return self.meta["fit"]
 

@@ -49,7 +49,7 @@ def calibrate_class(job: dict) -> dict:
         checkpoint = out / "posteriors" / f"{name}.chain.h5"
         seed = job["seed"] if k == 0 else child_seed(job["seed"], "drone", drone)
         res = calibrate(X[drones == drone], cls, acquisition=job["acquisition"], settings=job["settings"],
-                        random_state=seed, backend_path=checkpoint)
+                        random_state=seed, backend_path=checkpoint).record_specimens([drone])
         res.save(out / "posteriors" / f"{name}.nc")
         for f in checkpoint.parent.glob(checkpoint.name + "*"):
             f.unlink()  # only needed to resume an interrupted run

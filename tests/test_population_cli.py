@@ -28,7 +28,8 @@ def test_calibrate_population_keeps_each_drone_and_reuses_it(drones, capsys):
     assert "population of HELI: 2 drone(s) (0, 1)" in text
     pop = PopulationResult.load(out, class_name="HELI")
     assert pop.n_drones == 2 and not pop.assumed
-    assert (drones / "pop.npz.drone-0.nc").is_file() and (drones / "pop.npz.drone-1.nc").is_file()
+    from mdaug.inference.result import CalibrationResult
+    assert CalibrationResult.load(drones / "pop.npz.drone-1.nc").specimens == ["1"]
     assert main(["calibrate", str(drones / "d.npz"), "--class", "HELI", "--population", *FAST,
                  "--out", str(out)]) == 0
     again = capsys.readouterr().out
@@ -48,6 +49,8 @@ def test_one_drone_is_calibrated_alone_with_specimen(drones, capsys):
     assert main(["calibrate", str(drones / "d.npz"), "--class", "HELI", "--specimen", "1", *FAST,
                  "--out", str(out)]) == 0
     assert "calibrating HELI from 2 profile(s)" in capsys.readouterr().out
+    from mdaug.inference.result import CalibrationResult
+    assert CalibrationResult.load(out).specimens == ["1"]
 
 
 @pytest.mark.parametrize("argv, says", [
