@@ -158,8 +158,8 @@ class PopulationResult:
                 f"{max(self.meta['diagnostics']['tau']):.0f})")
         bad = [s for s, ok in zip(self.meta["specimens"], self.meta["drones_converged"]) if not ok]
         if bad and not self.assumed:
-            head += (f"\n  drone calibration(s) NOT converged: {', '.join(bad)}; a drone posterior that is too narrow or "
-                     "off its truth makes the spreads absorb the offset (read them as upper bounds)")
+            head += (f"\n  drone calibration(s) NOT converged: {', '.join(bad)}; the spreads inherit their errors (a drone "
+                     "posterior too narrow or off its truth inflates a spread, one too wide shrinks it)")
         if self.assumed:
             head += "\n  one drone: the spreads are the stated prior (SpecimenSpread's physical guesses), assumed"
         lines = [head, f"  {'spread':<10} {'prior median [90%]':>24} {'posterior median [90%]':>28}  status"]

@@ -87,8 +87,9 @@ def _population(cls: str, c: dict, w: Html) -> str:
         head = (f"Calibrated from {fmt(len(drones))} drones ({w.esc(', '.join(map(str, drones)))}): each spread "
                 "across drones, its prior (assumed) against its posterior (measured where the drones moved it).")
     if bad and not c.get("population_assumed"):
-        head += " " + w.warn(f"Drone calibration(s) not converged ({', '.join(map(str, bad))}): a drone posterior "
-                             "that is too narrow or off its truth makes the spreads absorb the offset.")
+        head += " " + w.warn(f"Drone calibration(s) not converged ({', '.join(map(str, bad))}): the spreads inherit "
+                             "their errors (a drone posterior too narrow or off its truth inflates a spread, one too "
+                             "wide shrinks it).")
     cells = [[td(x["spread"]), td(f"{fmt(x['prior_median'], 3)} <span class='ci'>[{fmt(x['prior_q05'], 3)}, "
                                   f"{fmt(x['prior_q95'], 3)}]</span>"),
               td(f"{fmt(x['median'], 3)} <span class='ci'>[{fmt(x['q05'], 3)}, {fmt(x['q95'], 3)}]</span>"),
