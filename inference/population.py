@@ -149,14 +149,17 @@ def summarise_drone(result, model: PopulationModel, reference: np.ndarray, speci
     """A :class:`DroneSummary` from a drone's :class:`~.result.CalibrationResult`."""
     x = align_lines(result.draws(), reference)
     y = model.transform(x)
-    b = result.priors.bounds
-    prior_sd = np.array([(b["lnG"][1] - b["lnG"][0]) if kind == "gamma" else b[name.split("[")[0]][1] -
-                         b[name.split("[")[0]][0] for name, kind in zip(model.names, model.kinds)]) / np.sqrt(12)
+    bounds = result.priors.bounds
+    # identified: posterior sd <= IDENTIFIED_SD_RATIO x prior sd (uniform priors: width / sqrt 12), in the
+    # prior's own coordinate (x for A, w, C; ln for the Gamma ratios)
+    width = np.array([np.subtract(*bounds["lnG" if kind == "gamma" else name.split("[")[0]][::-1])
+                      for name, kind in zip(model.names, model.kinds)])
     post_sd = np.where(model.kinds == "gamma", y.std(axis=0), x[:, model.cols].std(axis=0))
-    mask = post_sd <= IDENTIFIED_SD_RATIO * prior_sd
+    mask = post_sd <= IDENTIFIED_SD_RATIO * width / np.sqrt(12)
+    k = int(mask.sum())
     ys = y[:, mask]
-    cov = np.atleast_2d(np.cov(ys, rowvar=False)) + 1e-10 * np.eye(int(mask.sum()))
-    mean = ys.mean(axis=0) - cov @ model.linear_prior[mask].astype(float)
+    cov = (np.cov(ys, rowvar=False).reshape(k, k) if k else np.zeros((0, 0))) + 1e-10 * np.eye(k)
+    mean = ys.mean(axis=0) - cov @ model.linear_prior[mask].astype(float)  # the prior's tilt divided out
     return DroneSummary(str(specimen), mask, mean, cov, x)
 
 
@@ -175,6 +178,8 @@ def log_marginal(spreads: np.ndarray, drones: list[DroneSummary], model: Populat
         groups.setdefault(np.asarray(d.mask, bool).tobytes(), []).append(d)
     for group in groups.values():
         idx = np.flatnonzero(group[0].mask)
+        if not idx.size:
+            continue  # a drone that identifies nothing says nothing of the spreads
         means = np.stack([d.mean for d in group])  # (G, k)
         c = np.stack([d.cov for d in group])[None] + sig[:, None, idx[:, None], idx[None, :]]  # (W, G, k, k)
         chol = np.linalg.cholesky(c)
