@@ -79,7 +79,8 @@ def laplace_covariance(log_post, layout, theta: np.ndarray) -> np.ndarray:
     A = -D @ H @ D
     w, V = np.linalg.eigh((A + A.T) / 2)
     w = np.maximum(w, 1e-3)
-    return D @ (V / w) @ V.T @ D
+    cov = D @ (V / w) @ V.T @ D
+    return (cov + cov.T) / 2
 
 
 def mixture_t(centres: list, covs: list, log_mass: np.ndarray):
