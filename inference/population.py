@@ -206,6 +206,7 @@ def sample_spreads(drones: list[DroneSummary], model: PopulationModel, hyperprio
     whether it converged."""
     import emcee
 
+    from ..radar.progress import progress_bar
     from .ensemble import estimate_tau
 
     measured = np.any([d.mask for d in drones], axis=0)  # none: the spreads keep their prior
@@ -223,12 +224,15 @@ def sample_spreads(drones: list[DroneSummary], model: PopulationModel, hyperprio
                                     moves=[(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)])
     state = emcee.State(u0, random_state=np.random.RandomState(int(rng.integers(2**31 - 1))).get_state())
     steps, tau = 0, np.full(len(SPREADS), np.inf)
-    while steps < max_steps:
-        state = sampler.run_mcmc(state, min(block, max_steps - steps), progress=False)
-        steps = sampler.iteration
-        tau = estimate_tau(sampler.get_chain())
-        if steps >= min_tau_multiple * tau.max():
-            break
+    with progress_bar(total=max_steps, desc="population spreads", unit="step") as bar:
+        while steps < max_steps:
+            state = sampler.run_mcmc(state, min(block, max_steps - steps), progress=False)
+            bar.update(sampler.iteration - steps)
+            steps = sampler.iteration
+            tau = estimate_tau(sampler.get_chain())
+            bar.set_postfix(tau=f"{tau.max():.0f}", need=f"{min_tau_multiple * tau.max():.0f}")
+            if steps >= min_tau_multiple * tau.max():
+                break
     converged = bool(steps >= min_tau_multiple * tau.max())
     t = float(np.max(tau))
     burn, thin = int(min(steps // 3, 3 * t)), max(1, int(t / 2))
