@@ -96,6 +96,9 @@ def run_calibrate(args) -> int:
     from .guard import Output, check_paths
 
     backend = _backend(args)
+    if args.population and (args.corner or args.trace or args.backend or args.specimen is not None):
+        raise ValueError("--corner, --trace, --backend and --specimen apply to one drone's calibration, not to "
+                         "--population (each drone's posterior is kept as OUT.drone-ID.nc)")
     check_paths(inputs=[("MEASURED", args.measured)],
                 outputs=[Output("--out", args.out, "npz" if args.population else "posterior"),
                          Output("--corner", args.corner, "plot"),
@@ -239,6 +242,10 @@ def run_population(args, profiles, drones, settings, acquisition) -> int:
 
 def _interrupted(args) -> str:
     """What an interrupt leaves, as it is: the checkpoint files that exist now."""
+    if args.population:
+        done = sorted(Path(args.out).parent.glob(f"{Path(args.out).name}.drone-*.nc"))
+        return (f"{len(done)} drone posterior(s) {Path(args.out).name}.drone-*.nc and the running drone's chain "
+                "checkpoint are kept; run the same command again to resume")
     kept = [p for p in _checkpoint_files(args) if p.exists()]
     if not kept:
         return ("no chain checkpoint was written yet (interrupted before the fit finished); nothing to resume: "

@@ -58,6 +58,8 @@ def test_one_drone_is_calibrated_alone_with_specimen(drones, capsys):
      "d.npz: field 'specimen' holds no drone '7' of class HELI (drones present: ['0', '1'])"),
     (["calibrate", "{d}/d.npz", "--class", "HELI", "--population", "--out", "{d}/x.nc"],
      "--out"),
+    (["calibrate", "{d}/d.npz", "--class", "HELI", "--population", "--corner", "{d}/c.png", "--out", "{d}/p.npz"],
+     "--corner, --trace, --backend and --specimen apply to one drone's calibration, not to --population"),
     (["augment", "--population", "HELI={d}/d.npz", "--out", "{d}/y.npz"],
      "d.npz: not a population file, missing field(s)"),
 ])
