@@ -1,17 +1,17 @@
 """Population augmentation: new drones of the class, drawn from its calibrated population.
 
 Each vector is a new drone (:meth:`.population_result.PopulationResult.draw_drones`:
-spreads and the mean drone from the hyper-posterior, then the specimen model),
-rendered under the drones' acquisition (the union of the carrier-return and
-noise-floor ranges their calibrations measured). No width to tune: the spreads are
-the population's, measured from several drones or, from one, the stated prior.
+spreads and the mean drone from the hyper-posterior, then the specimen model). The
+strategy registry (:mod:`mdaug.strategies`, row ``population``) renders them under the
+drones' acquisition (:meth:`PopulationResult.measured_acquisition`). No width to tune:
+the spreads are the population's, measured from several drones or, from one, the
+stated prior.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..generator.augment import ModelAugmenter, Renderer, VectorSource
-from ..radar import RadarConfig
+from ..generator.augment import VectorSource
 from .population_result import PopulationResult
 
 
@@ -41,20 +41,3 @@ class PopulationSource(VectorSource):
         return {"source": "population", "population_file": self.file, "class_name": p.class_name,
                 "n_drones": p.n_drones, "specimens": p.meta["specimens"], "spreads_assumed": p.assumed,
                 "hyper_converged": p.converged, "spreads": p.summary()}
-
-
-class PopulationAugmenter(ModelAugmenter):
-    """New drones from a population, rendered under ``acquisition`` (default: the
-    drones' own, with their measured carrier and noise ranges)."""
-
-    def __init__(self, population, *, label: str | None = None, acquisition=None, normalisation: str = "peak",
-                 radar: RadarConfig = RadarConfig(), dtype: str = "float32", through_chain: bool = False,
-                 scene=None, random_state=None):
-        src = PopulationSource(population, label=label)
-        acq = acquisition if acquisition is not None else src.population.acquisition
-        super().__init__(src, Renderer(acq, normalisation=normalisation, dtype=dtype, radar=radar,
-                                       through_chain=through_chain, scene=scene), random_state=random_state)
-        self.population = src.population
-
-    def settings(self) -> dict:
-        return {**super().settings(), "strategy": "population"}

@@ -117,16 +117,12 @@ class PopulationResult:
     def converged(self) -> bool:
         return bool(self.meta["diagnostics"]["converged"])
 
-    @property
-    def acquisition(self):
+    def measured_acquisition(self):
+        """The acquisition new drones are rendered under: the drones' own, with the union
+        of the carrier and noise ranges their calibrations measured."""
         from ..generator.acquisition import Acquisition
 
         return Acquisition.from_dict(self.meta["acquisition"], "population attribute 'acquisition'")
-
-    def measured_acquisition(self):
-        """The acquisition new drones are rendered under (the drones' own, with the union
-        of the carrier and noise ranges their calibrations measured)."""
-        return self.acquisition
 
     def spreads(self) -> np.ndarray:
         """Hyper-posterior draws of the spreads (n, 5), columns in :data:`SPREADS` order."""
