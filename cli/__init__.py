@@ -5,6 +5,7 @@ Modules, one per group of verbs (each defines its verbs once, in ``VERBS``):
 * :mod:`.data`: ``simulate``, ``process``;
 * :mod:`.augment`: ``augment``;
 * :mod:`.calibrate`: ``calibrate``;
+* :mod:`.estimator`: ``train-estimator``, ``sbc``;
 * :mod:`.classify`: ``train``, ``evaluate``, ``sweep``, ``baseline``;
 * :mod:`.study`: ``run``;
 * :mod:`.common`: what several verbs share (argument types, the global options,
@@ -25,8 +26,8 @@ import sys
 
 from .common import HelpFormatter, Parser, UsageError, global_options
 
-GROUPS = ("data", "augment", "calibrate", "classify", "sweep", "study")
-ORDER = ("simulate", "process", "calibrate", "augment", "train", "evaluate", "sweep", "baseline", "run")
+GROUPS = ("data", "augment", "calibrate", "estimator", "classify", "sweep", "study")
+ORDER = ("simulate", "process", "calibrate", "train-estimator", "sbc", "augment", "train", "evaluate", "sweep", "baseline", "run")
 """Verbs in the order ``mdaug --help`` lists them."""
 
 EXIT_BAD_INPUT = 2

@@ -148,8 +148,13 @@ def run_calibrate(args) -> int:
     if len(profiles) == 1:
         warn("calibrate", "one profile only: the posterior is weakly identified (the supported case is a handful "
                           "of measurements, typically 5)")
+    from .calibrate_amortized import calibration_method, run_amortized
+
+    method = calibration_method(args, acquisition)
     if args.population:
         return run_population(args, profiles, drones, settings, acquisition)
+    if method == "amortized":
+        return run_amortized(args, profiles, drones, settings, acquisition, cls)
     if len(set(drones.tolist())) > 1:
         warn("calibrate", f"{args.measured} holds {len(set(drones.tolist()))} drones of {cls} (field 'specimen'); "
                           "they are calibrated as one drone: --population calibrates each and the class's "
@@ -287,6 +292,17 @@ def add_calibrate(sub, parents, help):
                         "removed after success)")
     p.add_argument("--allow-unconverged", action="store_true",
                    help="exit 0 even when the sampler did not converge")
+    g = p.add_argument_group("method")
+    g.add_argument("--method", choices=("auto", "amortized", "likelihood"), default="auto",
+                   help="amortized: the class's trained estimator (simulation-based; the amortized posterior, "
+                        "and nlopt + emcee on the likelihood learned from the same simulations); likelihood: "
+                        "the closed-form likelihood with nlopt + a sampler (auto: amortized for measured "
+                        "acquisitions, likelihood for the published single chirp and --population)")
+    g.add_argument("--estimator", type=Path, default=None,
+                   help="estimator ZIP of mdaug train-estimator (default: the shipped one for the class and K)")
+    g.add_argument("--route", choices=("amortized", "emcee"), default=None,
+                   help="which of the two learned posteriors the file's posterior group holds (the other is "
+                        "kept beside it) (default: amortized)")
     g = p.add_argument_group("budget and sampler")
     g.add_argument("--quick", action="store_true",
                    help="short run of seconds, for a first look (usually not converged)")

@@ -99,11 +99,9 @@ class CalibrationResult:
         per_engine = ("chain", "draw", "engine")
         per_meas = ("chain", "draw", "measurement")
         expected = {"Gamma": per_engine, **{n: per_engine for n in SHARED}}
-        if self.marginal:
-            expected.update({n: per_meas for n in ("carrier", "offset", "noise_db")})
-        else:
+        if not self.marginal:
             expected.update({n: per_meas + ("engine",) for n in PHASE_NAMES})
-            expected.update({n: per_meas for n in ("offset", "sigma")})
+        expected.update({n: per_meas for n in self.nuisances})
         if "observed_data" in self.idata.groups() and "y" in self.idata.observed_data:
             y = self.idata.observed_data["y"]
             if y.ndim != 2 or y.shape[0] != m:
@@ -157,6 +155,18 @@ class CalibrationResult:
         return bool(self.meta.get("marginal", False))
 
     @property
+    def amortized(self) -> bool:
+        """Simulation-based (:mod:`.amortized`): every nuisance was marginalised by training."""
+        return bool(self.meta.get("amortized", False))
+
+    @property
+    def nuisances(self) -> tuple:
+        """The per-measurement variables of the posterior group."""
+        if self.amortized:
+            return ()
+        return ("carrier", "offset", "noise_db") if self.marginal else ("offset", "sigma")
+
+    @property
     def acquisition(self):
         """The :class:`~mdaug.generator.acquisition.Acquisition` the measurements were
         modelled with (the published single chirp for files that predate it)."""
@@ -169,7 +179,7 @@ class CalibrationResult:
         measured (the range of the measurements' posterior medians), where it measured
         them (marginal posteriors); otherwise the acquisition as stated."""
         acq = self.acquisition
-        if not self.marginal:
+        if not self.marginal or self.amortized:
             return acq
         carrier = np.median(self._var("carrier"), axis=0)  # (M,)
         noise = np.median(self._var("noise_db"), axis=0)
@@ -286,7 +296,7 @@ class CalibrationResult:
                     rows[f"{name}[{k}]@{m}"] = dict(mean=cs["mean"], sd=cs["sd"], q05=cs["q05"], q95=cs["q95"],
                                                     prior_sd=np.inf, sd_ratio=ratio,
                                                     identified=ratio <= IDENTIFIED_RATIO, kind="circular")
-            for name in (("carrier", "offset", "noise_db") if self.marginal else ("offset", "sigma")):
+            for name in self.nuisances:
                 v = self._var(name)[:, m]
                 q05, q95 = np.quantile(v, [0.05, 0.95])
                 rows[f"{name}@{m}"] = dict(mean=float(np.mean(v)), sd=float(np.std(v)), q05=float(q05),
@@ -296,9 +306,9 @@ class CalibrationResult:
 
     def report(self) -> str:
         """Human-readable fit, convergence and posterior summary (:func:`.result_report.report`)."""
-        from .result_report import report
+        from .result_report import amortized_report, report
 
-        return report(self, IDENTIFIED_RATIO)
+        return (amortized_report if self.amortized else report)(self, IDENTIFIED_RATIO)
 
     # ---- plots (:mod:`.result_plots`) ------------------------------------------------------
     def plot_matrix(self):

@@ -60,3 +60,40 @@ def report(res, identified_ratio: float) -> str:
     lines.append("units: m (amplitudes A), rad/s (angular frequencies w; f = w / 2 pi), rad (phases), "
                  "ratio (C, carrier x sum Gamma), bins (FFT bins), dB; sd_ratio: posterior sd / prior sd")
     return "\n".join(lines)
+
+
+def amortized_report(res, identified_ratio: float) -> str:
+    """The report of a simulation-based calibration (:mod:`.amortized`): the estimator,
+    both routes with their diagnostics and SBC figures, the out-of-range check and
+    the posterior summary table."""
+    import pandas as pd
+
+    d = res.diagnostics
+    est = d["estimator"]
+    lines = [f"class {res.class_name}: {res.n_engines} engine(s), {res.n_measurements} measurement(s), "
+             f"{res.n_draws} posterior draws",
+             f"acquisition: {res.acquisition.describe()}; every nuisance marginalised by training on the scene "
+             "simulator",
+             f"estimator: {est['class']} K = {est['ramps']}, {est['simulations']} simulated drones ({est['simulator']})"]
+    for route, s in est.get("sbc", {}).items():
+        lo, hi = s["coverage90_range"]
+        lines.append(f"  its SBC, {route}: outer-10% share {s['outer_share']:.3f} (honest 0.10), 90% coverage "
+                     f"{lo:.2f}-{hi:.2f} over {s['n_replicates']} simulated drones")
+    lines.append(f"amortized posterior: {d['amortized_seconds'] * 1e3:.0f} ms, {d['amortized_inside_prior']:.0%} of "
+                 "its draws inside the prior")
+    if "emcee" in d:
+        m = d["emcee"]
+        lines.append(f"emcee on the learned likelihood: {m['n_walkers']} walkers x {m['steps']} steps "
+                     f"({m['seconds']:.1f} s), max tau {m['tau_max']:.0f} steps, chain/tau {m['steps_over_tau']:.1f}, "
+                     f"min ESS {m['ess_min']:.0f}, R-hat max {m['rhat_max']:.3f}, acceptance {m['acceptance_mean']:.2f}: "
+                     + ("converged" if m["converged"] else "NOT CONVERGED") + f" ({m['reason']})")
+    lines.append(f"posterior used by the strategies: {d['route']} ({d['reason']})")
+    if d.get("out_of_range"):
+        lines.append(f"WARNING: {d['out_of_range_why']}")
+    table = res.summary()[["mean", "sd", "q05", "q95", "sd_ratio", "identified"]]
+    table.insert(0, "unit", [summary_unit(n) for n in table.index])
+    with pd.option_context("display.width", 140, "display.max_rows", 500):
+        lines.append(table.to_string(float_format=lambda v: f"{v:.4g}"))
+    lines.append("units: m (amplitudes A), rad/s (angular frequencies w; f = w / 2 pi); sd_ratio: posterior sd / "
+                 f"prior sd (identified at <= {identified_ratio})")
+    return "\n".join(lines)

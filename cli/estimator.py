@@ -1,0 +1,175 @@
+"""``mdaug train-estimator`` and ``mdaug sbc``: the amortized calibration's estimators.
+
+train-estimator simulates drones of a class under an acquisition (resumable shards,
+``--workers`` processes), trains the amortized posterior and the learned likelihood
+(progress bar, early stopping, checkpoints; ``--device``), ends with its own SBC and
+writes the estimator ZIP. sbc checks an estimator (shipped or a file) on fresh
+simulated drones: both routes, rank statistics, coverage, TARP, widths.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from .common import add_verb, info, integer, positive_float, positive_int, result, seed_int
+
+MAX_SIMULATIONS = 2_000_000
+MAX_MEASUREMENTS = 32
+
+
+def _sims(text: str) -> int:
+    import argparse
+
+    v = integer(text, 100, "an integer >= 100")
+    if v > MAX_SIMULATIONS:
+        raise argparse.ArgumentTypeError(f"expected at most {MAX_SIMULATIONS}, got {v}")
+    return v
+
+
+def _meas(text: str) -> int:
+    import argparse
+
+    v = integer(text, 1, "an integer >= 1")
+    if v > MAX_MEASUREMENTS:
+        raise argparse.ArgumentTypeError(f"expected at most {MAX_MEASUREMENTS} measurements per drone, got {v}")
+    return v
+
+
+def _interrupted(args) -> str:
+    if args.verb == "train-estimator":
+        return (f"the simulations and training checkpoints in {_work(args)} are kept; run the same command again "
+                "to resume")
+    return "nothing was written"
+
+
+def _work(args) -> Path:
+    return args.work if args.work is not None else Path(f"{args.out}.work")
+
+
+def _class(text: str) -> str:
+    from ..generator import load_reference
+
+    name = text.upper()
+    try:
+        load_reference(name)
+    except (KeyError, ValueError):
+        raise ValueError(f"--class: no class reference {text!r} (known: HELI, QUAD)") from None
+    return name
+
+
+def run_train(args) -> int:
+    from ..generator.acquisition import Acquisition
+    from ..inference.amortized.job import train_estimator
+    from ..inference.amortized.shipped import default_nets, default_training
+    from ..inference.amortized.simulate import SimulationSpec
+    from ..inference.amortized.train import device_of
+    from ..radar.progress import progress_enabled
+    from .guard import Output, check_paths
+
+    cls = _class(args.class_name)
+    device_of(args.device)  # refuses cuda without a GPU, before any work
+    check_paths(outputs=[Output("--out", args.out, "model"), Output("--work", _work(args), "folder")])
+    spec = SimulationSpec(cls, Acquisition.measured(args.ramps), args.measurements)
+    cfg = default_training()
+    if args.epochs is not None:
+        from dataclasses import replace
+
+        cfg = replace(cfg, max_epochs=args.epochs)
+    info(f"training the {cls} estimator at K = {args.ramps}: {args.simulations} simulated drones x "
+         f"{args.measurements} measurements, work folder {_work(args)}")
+    est = train_estimator(spec, args.simulations, _work(args), args.out, seed=args.seed, workers=args.workers,
+                          device=args.device, net_cfg=default_nets(cls), train_cfg=cfg,
+                          post_budget=args.posterior_budget, ratio_budget=args.ratio_budget,
+                          sbc_truths=args.sbc_truths, sbc_mcmc_truths=args.sbc_emcee_truths,
+                          progress=progress_enabled(), log=info)
+    result(f"wrote {args.out} ({est.meta['job_seconds']:.0f} s)")
+    return 0
+
+
+def run_sbc(args) -> int:
+    from ..generator.acquisition import Acquisition
+    from ..inference.amortized.job import estimator_sbc
+    from ..inference.amortized.sbc import headline
+    from ..inference.amortized.shipped import find
+    from ..inference.settings import CalibrationSettings
+    from ..radar.progress import progress_enabled
+    from .guard import Output, check_paths
+
+    cls = _class(args.class_name)
+    check_paths(inputs=[("--estimator", args.estimator)], outputs=[Output("--json", args.json, "json")])
+    est = find(cls, Acquisition.measured(args.ramps), path=args.estimator)
+    settings = CalibrationSettings(progress=False, time_budget=args.time_budget)
+    out = estimator_sbc(est, args.truths, seed=args.seed, workers=args.workers, mcmc_truths=args.emcee_truths,
+                        mcmc_settings=settings, progress=progress_enabled(), log=info)
+    for route, s in out.items():
+        if not isinstance(s, dict):
+            continue
+        result(f"{cls} K={args.ramps} {route}: {headline(s)}")
+        widths = " ".join(f"{k.split()[1]}{k[-3:]} {v:.2f}/{s['prior_width_over_truth'][k]:.2f}"
+                          for k, v in s["width_over_truth"].items())
+        result(f"  median 90% width / truth (posterior/prior): {widths}")
+    if args.json is not None:
+        from ..radar.io import atomic_write
+
+        text = json.dumps(out, indent=1, default=float, allow_nan=False)
+        atomic_write(args.json, lambda fh: fh.write(text.encode()))
+        result(f"wrote {args.json}")
+    return 0
+
+
+def add_train(sub, parents, help):
+    p = add_verb(sub, "train-estimator", parents, help=help, interrupted=_interrupted,
+                 description="Simulate drones of a class from its calibration prior through the scene simulator "
+                             "and the radar chain, train the amortized posterior and the learned likelihood, check "
+                             "them by SBC on fresh drones and write the estimator (a ZIP of weights and JSON "
+                             "metadata, no pickle). A rerun of the same command resumes.")
+    p.add_argument("--class", dest="class_name", required=True, metavar="CLASS", help="HELI or QUAD")
+    p.add_argument("--ramps", type=positive_int, required=True, metavar="K", help="ramps per frame of the data")
+    p.add_argument("--out", type=Path, required=True, help="estimator ZIP")
+    p.add_argument("--work", type=Path, default=None, help="work folder (simulations, checkpoints) (default: "
+                                                           "OUT.work)")
+    p.add_argument("--simulations", type=_sims, default=20000, metavar="N",
+                   help="simulated drones (default: %(default)s)")
+    p.add_argument("--measurements", type=_meas, default=10, metavar="M",
+                   help="most measurements of one drone the estimator takes (default: %(default)s)")
+    p.add_argument("--workers", type=positive_int, default=1, metavar="N", help="simulation processes")
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto",
+                   help="where to train (auto: a GPU when present)")
+    p.add_argument("--seed", type=seed_int, default=0)
+    p.add_argument("--epochs", type=positive_int, default=None, metavar="N", help="most epochs per network")
+    p.add_argument("--posterior-budget", type=positive_float, default=None, metavar="SECONDS",
+                   help="training seconds of the posterior network (default: none)")
+    p.add_argument("--ratio-budget", type=positive_float, default=None, metavar="SECONDS",
+                   help="training seconds of the likelihood network (default: none)")
+    p.add_argument("--sbc-truths", type=integer, default=300, metavar="N",
+                   help="SBC drones of the amortized route (default: %(default)s; 0: none)")
+    p.add_argument("--sbc-emcee-truths", type=integer, default=0, metavar="N",
+                   help="SBC drones of the emcee route (default: %(default)s)")
+    p.set_defaults(func=run_train)
+    return p
+
+
+def add_sbc(sub, parents, help):
+    p = add_verb(sub, "sbc", parents, help=help, interrupted=_interrupted,
+                 description="Simulation-based calibration of an estimator on fresh simulated drones (5 "
+                             "measurements each): outer-10% share (0.10 when honest), 90% coverage, rank "
+                             "chi-square, TARP, and the median 90% width over the truth beside the prior's.")
+    p.add_argument("--class", dest="class_name", required=True, metavar="CLASS", help="HELI or QUAD")
+    p.add_argument("--ramps", type=positive_int, required=True, metavar="K")
+    p.add_argument("--estimator", type=Path, default=None, help="estimator ZIP (default: the shipped one)")
+    p.add_argument("--truths", type=positive_int, default=300, metavar="N")
+    p.add_argument("--emcee-truths", type=integer, default=0, metavar="N",
+                   help="of those, how many also through nlopt + emcee on the learned likelihood")
+    p.add_argument("--time-budget", type=positive_float, default=60.0, metavar="SECONDS",
+                   help="emcee seconds per drone (default: %(default)s)")
+    p.add_argument("--workers", type=positive_int, default=1, metavar="N")
+    p.add_argument("--seed", type=seed_int, default=1)
+    p.add_argument("--json", type=Path, default=None, help="write the figures as JSON")
+    p.set_defaults(func=run_sbc)
+    return p
+
+
+VERBS = {
+    "train-estimator": ("train a class's amortized calibration estimator on the simulator", add_train),
+    "sbc": ("check an estimator by simulation-based calibration", add_sbc),
+}

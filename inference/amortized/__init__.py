@@ -1,0 +1,1 @@
+"""Amortized calibration (module docs in each file)."""

@@ -1,0 +1,194 @@
+"""What the measurements identify, and the space the networks and samplers work in.
+
+A drone's physics (the shared block of a :class:`~mdaug.inference.layout.Layout`: per
+engine ``A_a, A_b, A_p, A_m, w_a, w_b, C_p, C_m`` and Gamma ratios) is seen by a
+profile only through its vibration lines: which line is the roll, the pitch or a
+mixing term is a labelling that no profile fixes (:mod:`mdaug.inference.priors`).
+The label-free quantities ``q`` are, per engine (engines sorted by their lowest
+line), the four line frequencies sorted (rad/s) and their amplitudes (m) in the same
+order, and for engines k >= 1 ``lnG`` = ln(Gamma_k / Gamma_0). The networks see them
+unbounded (``u``): log of the lowest line, log of the three gaps (keeps the order),
+logit of each amplitude over the largest amplitude bound, lnG as it is.
+
+:class:`DroneSpace` is the drone's block of a one-measurement marginal layout: prior
+draws, the exact prior density with its ordering constraints, the line-relabelling
+move, and the class vectors, which the emcee path samples in.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ...generator import IDX, N_PARAMS
+from ..layout import Layout
+from ..priors import PERMUTATIONS, Priors, align_lines, engine_lines
+
+_PERMS = np.asarray(PERMUTATIONS)
+_EPS = 1e-9
+
+
+class LabelFree:
+    """Label-free quantities of one class's drones (module doc).
+
+    n_engines: E; priors: the calibration prior (amplitude bound for the logit,
+    Gamma_0, and the box that mapped-back vectors must satisfy); reference: (13E,)
+    class vector whose labelling mapped-back vectors take where the prior allows."""
+
+    def __init__(self, n_engines: int, priors: Priors, reference: np.ndarray):
+        self.E, self.priors = int(n_engines), priors
+        self.reference = np.asarray(reference, float).reshape(-1)[: self.E * N_PARAMS]
+        b = priors.bounds
+        self.a_max = float(max(b["A_a"][1], b["A_p"][1], b["A_m"][1]))
+        self.dim = 8 * self.E + (self.E - 1)
+
+    @property
+    def names(self) -> list[str]:
+        out = []
+        for k in range(self.E):
+            out += [f"line {j + 1} w[{k}]" for j in range(4)] + [f"line {j + 1} A[{k}]" for j in range(4)]
+            if k:
+                out.append(f"lnG[{k}]")
+        return out
+
+    @property
+    def kinds(self) -> list[str]:
+        """'w' (rad/s), 'A' (m) or 'lnG' per quantity."""
+        return [n.split()[-1][0] if n.startswith("line") else "lnG" for n in self.names]
+
+    # ---- vectors -> q -> u ----------------------------------------------------------------
+    def quantities(self, x: np.ndarray) -> np.ndarray:
+        """Class vectors (n, 13E) -> q (n, dim): the label-free quantities."""
+        x = np.atleast_2d(np.asarray(x, float))
+        n = len(x)
+        xe = x.reshape(n, self.E, N_PARAMS)
+        w, a, _ = engine_lines(xe)
+        order = np.argsort(w, axis=-1)
+        w, a = np.take_along_axis(w, order, -1), np.take_along_axis(a, order, -1)
+        eng = np.argsort(w[:, :, 0], axis=1, kind="stable")  # engines by their lowest line
+        w, a = np.take_along_axis(w, eng[..., None], 1), np.take_along_axis(a, eng[..., None], 1)
+        lng = np.log(np.take_along_axis(xe[..., IDX["Gamma"]], eng, 1))
+        cols = []
+        for k in range(self.E):
+            cols += [w[:, k], a[:, k]]
+            if k:
+                cols.append((lng[:, k] - lng[:, 0])[:, None])
+        return np.concatenate(cols, axis=1)
+
+    def to_unbounded(self, q: np.ndarray) -> np.ndarray:
+        """q (n, dim) -> u (n, dim)."""
+        q = np.atleast_2d(np.asarray(q, float))
+        u = np.empty_like(q)
+        j = 0
+        for k in range(self.E):
+            w = q[:, j: j + 4]
+            u[:, j] = np.log(np.maximum(w[:, 0], _EPS))
+            u[:, j + 1: j + 4] = np.log(np.maximum(np.diff(w, axis=1), _EPS))
+            r = np.clip(q[:, j + 4: j + 8] / self.a_max, _EPS, 1 - _EPS)
+            u[:, j + 4: j + 8] = np.log(r) - np.log1p(-r)
+            j += 8
+            if k:
+                u[:, j] = q[:, j]
+                j += 1
+        return u
+
+    def from_unbounded(self, u: np.ndarray) -> np.ndarray:
+        """u (n, dim) -> q (n, dim)."""
+        u = np.atleast_2d(np.asarray(u, float))
+        q = np.empty_like(u)
+        j = 0
+        for k in range(self.E):
+            q[:, j: j + 4] = np.cumsum(np.exp(np.clip(u[:, j: j + 4], -50, 50)), axis=1)
+            q[:, j + 4: j + 8] = self.a_max / (1.0 + np.exp(-np.clip(u[:, j + 4: j + 8], -50, 50)))
+            j += 8
+            if k:
+                q[:, j] = u[:, j]
+                j += 1
+        return q
+
+    # ---- q -> class vectors ---------------------------------------------------------------------
+    def vectors(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """q (n, dim) -> (class vectors (n, 13E), ok (n,)). Each engine's lines get the
+        labelling closest to the reference's among those the prior allows (w_a < w_b,
+        C_p and C_m and every amplitude and frequency inside its bounds); engines are
+        put in the prior's order (w_a increasing) with Gamma_0 fixed. ``ok`` is False
+        where no labelling of some engine fits the prior: such a q lies outside the
+        prior's support (phases are 0). Gamma ratios are not bounded here."""
+        q = np.atleast_2d(np.asarray(q, float))
+        n, b = len(q), self.priors.bounds
+        out = np.zeros((n, self.E, N_PARAMS))
+        ok = np.ones(n, bool)
+        w_ref, _, _ = engine_lines(self.reference.reshape(self.E, N_PARAMS))
+        j, lng = 0, np.zeros((n, self.E))
+        inside = lambda v, name: (v >= b[name][0]) & (v <= b[name][1])  # noqa: E731
+        for k in range(self.E):
+            w, a = q[:, j: j + 4], q[:, j + 4: j + 8]
+            j += 8
+            if k:
+                lng[:, k] = q[:, j]
+                j += 1
+            wp, ap = w[:, _PERMS], a[:, _PERMS]  # (n, 24, 4) in role order a, b, p, m
+            s, d = wp[..., 0] + wp[..., 1], wp[..., 1] - wp[..., 0]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                cp, cm = wp[..., 2] / s, wp[..., 3] / d
+            valid = ((d > 0) & inside(cp, "C_p") & inside(cm, "C_m") & inside(wp[..., 0], "w_a")
+                     & inside(wp[..., 1], "w_b") & inside(ap[..., 0], "A_a") & inside(ap[..., 1], "A_b")
+                     & inside(ap[..., 2], "A_p") & inside(ap[..., 3], "A_m"))
+            with np.errstate(divide="ignore"):
+                cost = np.abs(np.log(np.maximum(wp, 1e-300)) - np.log(w_ref[k % len(w_ref)])).sum(-1)
+            pick = np.argmin(np.where(valid, cost, np.inf), axis=1)
+            ok &= valid.any(axis=1)
+            r = np.arange(n)
+            for role, col in enumerate("abpm"):
+                out[:, k, IDX[f"A_{col}"]] = ap[r, pick, role]
+            out[:, k, IDX["w_a"]], out[:, k, IDX["w_b"]] = wp[r, pick, 0], wp[r, pick, 1]
+            out[:, k, IDX["C_p"]], out[:, k, IDX["C_m"]] = cp[r, pick], cm[r, pick]
+        order = np.argsort(out[:, :, IDX["w_a"]], axis=1, kind="stable")
+        out = np.take_along_axis(out, order[..., None], 1)
+        lng = np.take_along_axis(lng, order, 1)
+        lng = lng - lng[:, :1]
+        out[:, :, IDX["Gamma"]] = self.priors.gamma0 * np.exp(lng)
+        x = out.reshape(n, self.E * N_PARAMS)
+        x[~ok] = np.nan_to_num(x[~ok])
+        return x, ok
+
+    def aligned(self, x: np.ndarray) -> np.ndarray:
+        """Vectors relabelled to the reference's labelling (:func:`align_lines`)."""
+        return align_lines(x, self.reference)
+
+
+class DroneSpace:
+    """The drone's physics block (shared columns) of a one-measurement marginal
+    :class:`Layout`: what the emcee path samples (module doc)."""
+
+    def __init__(self, n_engines: int, priors: Priors):
+        self.layout = Layout(n_engines, 1, priors, marginal=True)
+        self.dim = self.layout.n_shared
+        lo, hi = self.layout.z_bounds()
+        t_lo, t_hi = self.layout.tail_bounds
+        self._pad = np.concatenate([0.5 * (lo + hi)[self.dim:], [0.5 * (t_lo + t_hi)]])
+        self.names = self.layout.shared_names
+
+    def _full(self, s: np.ndarray) -> np.ndarray:
+        s = np.atleast_2d(s)
+        return np.concatenate([s, np.broadcast_to(self._pad, (len(s), len(self._pad)))], axis=1)
+
+    def sample_prior(self, n: int, rng) -> np.ndarray:
+        """n prior draws (n, dim)."""
+        return self.layout.sample_prior(n, rng)[:, : self.dim]
+
+    def log_prior(self, s: np.ndarray) -> np.ndarray:
+        """0 inside the prior's support (box and ordering constraints), -inf outside."""
+        return self.layout.log_prior(self._full(s))
+
+    def random_relabel(self, s: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray]:
+        """The exact line-relabelling move (:meth:`Layout.random_relabel`)."""
+        t, lj = self.layout.random_relabel(self._full(s), rng)
+        return t[:, : self.dim], lj
+
+    def vectors(self, s: np.ndarray) -> np.ndarray:
+        """Class vectors (n, 13E) of draws s (n, dim) (phases 0)."""
+        return self.layout.shared_physics(self._full(s))
+
+    def from_vectors(self, x: np.ndarray) -> np.ndarray:
+        """Draws s (n, dim) of class vectors (n, 13E) in the prior's order."""
+        x = np.atleast_2d(x)
+        return np.stack([self.layout.z_from_physics(v)[: self.dim] for v in x])

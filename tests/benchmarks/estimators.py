@@ -1,0 +1,91 @@
+"""Train the shipped amortized estimators (or any set of them) side by side.
+
+python tests/benchmarks/estimators.py --out DIR [--jobs HELI:32:24000:4,QUAD:32:24000:6,...]
+    [--device auto] [--posterior-budget 150] [--ratio-budget 90] [--sbc-truths 300]
+
+Each job CLASS:K:SIMULATIONS:WORKERS runs in its own process (simulation on WORKERS
+processes, then training on the device, then its SBC), writing DIR/<class>-k<K>.zip
+with its work folder (resumable) and log under DIR/work/. This is
+how the estimators in mdaug/inference/amortized/data were made (the README's
+calibration page gives the command line and the figures each job printed).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import time
+import warnings
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+warnings.simplefilter("ignore")
+
+DEFAULT_JOBS = "QUAD:32:24000:6,HELI:32:24000:4,QUAD:4:40000:2,HELI:4:40000:2,QUAD:1:40000:1,HELI:1:40000:1"
+
+
+def one(cls: str, ramps: int, n: int, workers: int, out: str, device: str, post_budget: float,
+        ratio_budget: float, sbc_truths: int, seed: int, threads: int) -> None:
+    import torch
+
+    from mdaug.generator.acquisition import Acquisition
+    from mdaug.inference.amortized.job import train_estimator
+    from mdaug.inference.amortized.shipped import default_nets, default_training
+    from mdaug.inference.amortized.simulate import SimulationSpec
+
+    torch.set_num_threads(threads)
+    name = f"{cls.lower()}-k{ramps}"
+    os.makedirs(os.path.join(out, "work"), exist_ok=True)
+    log_path = os.path.join(out, "work", f"{name}.log")
+
+    def log(msg):
+        line = f"[{time.strftime('%H:%M:%S')}] {msg}"
+        print(line, flush=True)
+        with open(log_path, "a") as fh:
+            fh.write(line + "\n")
+
+    spec = SimulationSpec(cls, Acquisition.measured(ramps), 10)
+    cfg = default_training()
+    est = train_estimator(spec, n, os.path.join(out, "work", name), os.path.join(out, f"{name}.zip"), seed=seed,
+                          workers=workers, device=device, net_cfg=default_nets(cls),
+                          train_cfg=cfg, post_budget=post_budget, ratio_budget=ratio_budget,
+                          sbc_truths=sbc_truths, progress=False, log=log)
+    log(f"done: {est.meta['job_seconds']:.0f} s")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", required=True)
+    p.add_argument("--jobs", default=DEFAULT_JOBS)
+    p.add_argument("--device", default="auto")
+    p.add_argument("--posterior-budget", type=float, default=150.0)
+    p.add_argument("--ratio-budget", type=float, default=90.0)
+    p.add_argument("--sbc-truths", type=int, default=300)
+    p.add_argument("--seed", type=int, default=2026)
+    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--one", nargs=4, metavar=("CLASS", "K", "N", "WORKERS"), help=argparse.SUPPRESS)
+    a = p.parse_args(argv)
+    os.makedirs(a.out, exist_ok=True)
+    if a.one:
+        cls, k, n, w = a.one
+        one(cls, int(k), int(n), int(w), a.out, a.device, a.posterior_budget, a.ratio_budget, a.sbc_truths,
+            a.seed, a.threads)
+        return 0
+    procs = []
+    for job in a.jobs.split(","):
+        cls, k, n, w = job.split(":")
+        cmd = [sys.executable, __file__, "--out", a.out, "--device", a.device, "--posterior-budget",
+               str(a.posterior_budget), "--ratio-budget", str(a.ratio_budget), "--sbc-truths", str(a.sbc_truths),
+               "--seed", str(a.seed), "--threads", str(a.threads), "--one", cls, k, n, w]
+        procs.append((job, subprocess.Popen(cmd)))
+    status = 0
+    for job, proc in procs:
+        rc = proc.wait()
+        print(f"{job}: exit {rc}", flush=True)
+        status |= rc
+    return status
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,216 @@
+"""The amortized calibration: label-free target, networks, training, estimator files,
+SBC machinery (on a toy simulator whose posterior is known), the emcee route and
+the calibrate verb. Tiny networks and budgets: seconds."""
+import zipfile
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from mdaug.generator import load_reference  # noqa: E402
+from mdaug.generator.acquisition import Acquisition  # noqa: E402
+from mdaug.inference.amortized.estimator import AmortizedEstimator, EstimatorError  # noqa: E402
+from mdaug.inference.amortized.nets import NetConfig  # noqa: E402
+from mdaug.inference.amortized.simulate import SimulationSpec, simulate  # noqa: E402
+from mdaug.inference.amortized.target import DroneSpace, LabelFree  # noqa: E402
+from mdaug.inference.priors import Priors, engine_lines  # noqa: E402
+
+TINY = NetConfig(channels=(2, 4, 4, 4), trial_out=8, set_hidden=16, set_out=8, flow_hidden=16, flow_transforms=2,
+                 ratio_hidden=16)
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """A tiny HELI K=4 estimator, trained for two epochs, and its file."""
+    from mdaug.inference.amortized.job import train_estimator
+    from mdaug.inference.amortized.train import TrainConfig
+
+    torch.set_num_threads(1)
+    d = tmp_path_factory.mktemp("est")
+    spec = SimulationSpec("HELI", Acquisition.measured(4), 4)
+    est = train_estimator(spec, 120, d / "work", d / "heli-k4.zip", seed=3, device="cpu", net_cfg=TINY,
+                          train_cfg=TrainConfig(batch=32, max_epochs=2), sbc_truths=0, shard_size=60,
+                          progress=False, log=lambda m: None)
+    return est, d / "heli-k4.zip"
+
+
+@pytest.mark.parametrize("cls", ["HELI", "QUAD"])
+def test_label_free_round_trip_keeps_every_line(cls):
+    ref = load_reference(cls)
+    pr = Priors.from_reference(ref)
+    space, lf = DroneSpace(ref.n_engines, pr), LabelFree(ref.n_engines, pr, ref.to_array())
+    x = space.vectors(space.sample_prior(500, np.random.default_rng(0)))
+    q = lf.quantities(x)
+    assert q.shape == (500, 8 * ref.n_engines + ref.n_engines - 1)
+    np.testing.assert_allclose(lf.from_unbounded(lf.to_unbounded(q)), q, rtol=1e-9)
+    x2, ok = lf.vectors(q)
+    assert ok.all()  # every prior draw has a labelling the prior allows
+    np.testing.assert_allclose(lf.quantities(x2), q, rtol=1e-9)
+    # the mapped vectors carry the same lines (f(x) unchanged): compare sorted line sets per engine
+    w1, a1, _ = engine_lines(x.reshape(500, ref.n_engines, 13))
+    w2, a2, _ = engine_lines(x2.reshape(500, ref.n_engines, 13))
+    np.testing.assert_allclose(np.sort(w1.reshape(500, -1), 1), np.sort(w2.reshape(500, -1), 1), rtol=1e-9)
+    np.testing.assert_allclose(np.sort(a1.reshape(500, -1), 1), np.sort(a2.reshape(500, -1), 1), rtol=1e-9)
+    # lines are sorted in q: an engine's frequencies increase
+    w = q[:, :4]
+    assert np.all(np.diff(w, axis=1) > 0)
+
+
+def test_quantities_outside_the_prior_are_flagged():
+    ref = load_reference("HELI")
+    pr = Priors.from_reference(ref)
+    lf = LabelFree(1, pr, ref.to_array())
+    q = lf.quantities(ref.to_array()[None])
+    q_bad = q.copy()
+    q_bad[0, 4:8] = 10 * pr.bounds["A_a"][1]  # every amplitude far above its bound
+    _, ok = lf.vectors(np.vstack([q, q_bad]))
+    assert ok.tolist() == [True, False]
+
+
+def test_simulation_is_seeded_and_shaped():
+    spec = SimulationSpec("HELI", Acquisition.measured(4), 3)
+    x1, y1 = simulate(spec, 4, 7)
+    x2, y2 = simulate(spec, 4, 7)
+    assert y1.shape == (4, 3, 400) and y1.dtype == np.float32
+    np.testing.assert_array_equal(y1, y2)
+    np.testing.assert_allclose(y1.max(axis=2), 1.0)  # peak-normalised
+    assert np.all(np.argmax(y1, axis=2) == 200)  # peak-centred, as a measured file is prepared
+
+
+def test_subset_masks_keep_between_one_and_all():
+    from mdaug.inference.amortized.train import subset_mask
+
+    m = subset_mask(2000, 6, torch.Generator().manual_seed(0), "cpu")
+    kept = (~m).sum(1)
+    assert kept.min() == 1 and kept.max() == 6
+    assert abs(kept.float().mean().item() - 3.5) < 0.15  # uniform over 1..6
+
+
+def test_estimator_file_round_trip(tiny, tmp_path):
+    est, path = tiny
+    back = AmortizedEstimator.load(path)
+    spec = est.spec
+    _, y = simulate(spec, 1, 11)
+    u = est.label_free.to_unbounded(est.label_free.quantities(spec.space().vectors(
+        spec.space().sample_prior(5, np.random.default_rng(2)))))
+    np.testing.assert_allclose(back.log_prob_u(u, y[0]), est.log_prob_u(u, y[0]), rtol=1e-5, atol=1e-5)
+    emb = back.embed(y[0])
+    np.testing.assert_allclose(back.log_likelihood_u(u, emb), est.log_likelihood_u(u, est.embed(y[0])), atol=1e-5)
+    assert back.meta["n_simulations"] == 120 and back.meta["spec"]["acquisition"]["ramps"] == 4
+    assert {"posterior", "ratio"} <= set(back.meta["training"])
+
+
+def test_posterior_is_invariant_to_the_order_of_measurements(tiny):
+    est, _ = tiny
+    _, y = simulate(est.spec, 1, 5)
+    u = np.random.default_rng(0).normal(size=(6, est.label_free.dim))
+    a = est.log_prob_u(u, y[0])
+    b = est.log_prob_u(u, y[0][::-1].copy())
+    np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-5)
+    c = est.log_prob_u(u, y[0][:2])  # fewer measurements: another posterior
+    assert not np.allclose(a, c, atol=1e-4)
+
+
+def test_tampered_or_truncated_estimator_is_refused(tiny, tmp_path):
+    _, path = tiny
+    data = path.read_bytes()
+    cut = tmp_path / "cut.zip"
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.raises(EstimatorError, match="cut.zip: not a readable mdaug estimator"):
+        AmortizedEstimator.load(cut)
+    with zipfile.ZipFile(path) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    for name, change, text in [
+        ("nometa.zip", lambda m: m.pop("meta.json"), "member 'meta.json' missing"),
+        ("format.zip", lambda m: m.__setitem__("meta.json", m["meta.json"].replace(b"mdaug-estimator-1", b"x")),
+         "field 'format'"),
+        ("weights.zip", lambda m: m.__setitem__("ratio.pt", members["posterior.pt"]), "member 'ratio.pt'"),
+    ]:
+        m = dict(members)
+        change(m)
+        p = tmp_path / name
+        with zipfile.ZipFile(p, "w") as z:
+            for k, v in m.items():
+                z.writestr(k, v)
+        with pytest.raises(EstimatorError, match=text):
+            AmortizedEstimator.load(p)
+
+
+def test_data_of_another_acquisition_or_class_is_refused(tiny):
+    from mdaug.inference.amortized.shipped import find
+    from mdaug.radar import RadarConfig
+
+    est, path = tiny
+    y = np.ones((3, 400))
+    with pytest.raises(EstimatorError, match=r"acquisition field 'ramps' is 32 .* trained for 4; train one with: "
+                                             r"mdaug train-estimator --class HELI --ramps 32"):
+        est.check_data(y, Acquisition.measured(32), RadarConfig(), "data.npz")
+    with pytest.raises(EstimatorError, match="11 measurements; the estimator takes 1 to 4"):
+        est.check_data(np.ones((11, 400)), Acquisition.measured(4), RadarConfig(), "data.npz")
+    with pytest.raises(EstimatorError, match="'spec.class_name' is 'HELI'; the data are of class 'QUAD'"):
+        find("QUAD", Acquisition.measured(4), path=path)
+    with pytest.raises(EstimatorError, match="no shipped estimator for class HELI at K = 7"):
+        find("HELI", Acquisition.measured(7))
+
+
+def test_sbc_machinery_on_a_toy_with_a_known_posterior():
+    """theta ~ N(0, 1), 5 measurements x ~ N(theta, 1): the exact posterior is
+    N(sum x / 6, 1 / 6). Exact draws pass; draws 3x too narrow fail."""
+    from mdaug.inference.amortized.sbc import run
+
+    rng = np.random.default_rng(0)
+    truths = rng.normal(size=(300, 2))
+    data = truths[:, None, :] + rng.normal(size=(300, 5, 2))
+
+    def exact(y, n, s, shrink=1.0):
+        r = np.random.default_rng(s)
+        return y.sum(0) / 6 + r.normal(size=(n, 2)) * np.sqrt(1 / 6) * shrink, True
+
+    ok = run(exact, truths, data, ["a", "b"], n_rank=99, prior_q=rng.normal(size=(4000, 2)))
+    assert 0.06 <= ok["outer_share"] <= 0.14
+    assert 0.85 <= ok["coverage"]["0.90"] <= 0.95
+    assert ok["pooled_p"] > 0.001
+    assert abs(ok["tarp_atc"]) < 0.1
+    assert ok["width_over_truth"]["a"] < ok["prior_width_over_truth"]["a"]
+    bad = run(lambda y, n, s: exact(y, n, s, 1 / 3), truths, data, ["a", "b"], n_rank=99)
+    assert bad["outer_share"] > 0.4
+    assert bad["coverage"]["0.90"] < 0.6
+
+
+def test_training_resumes_from_its_checkpoint(tmp_path):
+    from mdaug.inference.amortized.train import TrainConfig, fit
+
+    g = torch.Generator().manual_seed(0)
+    u = torch.randn(200, 1, generator=g)
+    x = u[:, None, :].expand(200, 3, 1) + 0.1 * torch.randn(200, 3, 1, generator=g)
+
+    def loss(net, ub, xb):  # regress u on the mean of the kept measurements
+        keep = ~torch.isnan(xb[..., 0])
+        mean = torch.nan_to_num(xb[..., 0]).sum(1) / keep.sum(1)
+        return ((net(mean[:, None]) - ub) ** 2).mean()
+
+    cfg = TrainConfig(batch=50, max_epochs=4, patience=100)
+    torch.manual_seed(0)
+    net = torch.nn.Linear(1, 1)
+    log = fit(net, loss, u, x, cfg, 1, checkpoint=tmp_path / "ck.pt", progress=False)
+    assert log.epochs == 4 and log.history[-1][1] < log.history[0][1]
+    more = fit(net, loss, u, x, TrainConfig(batch=50, max_epochs=6, patience=100), 1, checkpoint=tmp_path / "ck.pt",
+               progress=False)
+    assert more.resumed_at == 4 and more.epochs == 6 and len(more.history) == 6
+
+
+def test_emcee_route_on_the_learned_likelihood_stays_in_the_prior(tiny):
+    from mdaug.inference.amortized.mcmc import LearnedPosterior, sample
+    from mdaug.inference.settings import CalibrationSettings
+
+    est, _ = tiny
+    _, y = simulate(est.spec, 1, 9)
+    u, _ = est.sample_u(y[0], 300, 1, strict=False)
+    post = LearnedPosterior(est, y[0])
+    run, fit = sample(post, u, CalibrationSettings(check_every=50, max_steps=200, time_budget=20), 4)
+    s = run.draws()
+    assert s.shape[1] == post.space.dim == 8
+    assert np.all(np.isfinite(post.space.log_prior(s)))
+    assert np.isfinite(fit["log_post"]) and fit["log_post"] >= fit["start_log_post"] - 1e-9
+    assert run.reason  # converged or says why not
