@@ -35,6 +35,21 @@ def _meas(text: str) -> int:
     return v
 
 
+def strict_json(obj):
+    """obj with NaN and inf as None (null), numpy scalars as floats: strict JSON."""
+    import math
+
+    if isinstance(obj, dict):
+        return {str(k): strict_json(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [strict_json(v) for v in obj]
+    if hasattr(obj, "tolist"):
+        return strict_json(obj.tolist())
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
 def _interrupted(args) -> str:
     if args.verb == "train-estimator":
         return (f"the simulations and training checkpoints in {_work(args)} are kept; run the same command again "
@@ -105,13 +120,13 @@ def run_sbc(args) -> int:
         if not isinstance(s, dict):
             continue
         result(f"{cls} K={args.ramps} {route}: {headline(s)}")
-        widths = " ".join(f"{k.split()[1]}{k[-3:]} {v:.2f}/{s['prior_width_over_truth'][k]:.2f}"
-                          for k, v in s["width_over_truth"].items())
+        widths = " ".join(f"{k.split()[2][0]}{k.split()[1]}{k[-3:]} {v:.2f}/{s['prior_width_over_truth'][k]:.2f}"
+                          for k, v in s["width_over_truth"].items() if k.startswith("line"))
         result(f"  median 90% width / truth (posterior/prior): {widths}")
     if args.json is not None:
         from ..radar.io import atomic_write
 
-        text = json.dumps(out, indent=1, default=float, allow_nan=False)
+        text = json.dumps(strict_json(out), indent=1, allow_nan=False)
         atomic_write(args.json, lambda fh: fh.write(text.encode()))
         result(f"wrote {args.json}")
     return 0

@@ -91,6 +91,8 @@ class ProtocolConfig:
     # calibration: the phases marginalised under the campaign's acquisition; a step cap per
     # class, so the same command gives the same numbers however busy the machine (the run is flagged
     # not converged when it ends before 50 tau), and an optional time budget on top
+    calibration_method: str = "auto"  # amortized (the shipped estimator), likelihood (closed form), auto: amortized
+    #                                    for measured acquisitions where an estimator ships for the class and K
     calibration_max_steps: int = 400
     calibration_time_budget: float | None = None
     calibration_starts: int = 2
@@ -185,6 +187,7 @@ class StudyConfig:
                      "calibration_max_steps", "calibration_starts", "calibration_fit_budget"):
             if getattr(p, name) < 1:
                 raise ValueError(f"{src}: protocol.{name} must be >= 1")
+        _check_names(src, "protocol.calibration_method", (p.calibration_method,), ("auto", "amortized", "likelihood"))
         _check_names(src, "protocol.models", p.models, ("svm", "nb", "xgb", "cnn"))
         _check_names(src, "protocol.normalisation", (p.normalisation,), NORMALISATIONS)
         _check_names(src, "protocol.strategies", p.strategies, STRATEGIES)

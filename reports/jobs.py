@@ -41,6 +41,9 @@ def calibrate_class(job: dict) -> dict:
     _threads(job.get("threads", 1))
     t0 = time.perf_counter()
     cls, out, X = job["cls"], Path(job["out"]), job["profiles"]
+    amortized = job.get("method", "likelihood") == "amortized"
+    if amortized:
+        from ..inference.amortized.calibrate import calibrate_amortized
     drones = np.asarray(job.get("drones", np.full(len(X), "0"))).astype(str)
     ids = list(dict.fromkeys(drones.tolist()))
     results = []
@@ -48,8 +51,12 @@ def calibrate_class(job: dict) -> dict:
         name = cls if k == 0 else f"{cls}.drone-{drone}"
         checkpoint = out / "posteriors" / f"{name}.chain.h5"
         seed = job["seed"] if k == 0 else child_seed(job["seed"], "drone", drone)
-        res = calibrate(X[drones == drone], cls, acquisition=job["acquisition"], settings=job["settings"],
-                        random_state=seed, backend_path=checkpoint).record_specimens([drone])
+        if amortized:
+            res = calibrate_amortized(X[drones == drone], cls, acquisition=job["acquisition"],
+                                      settings=job["settings"], random_state=seed).record_specimens([drone])
+        else:
+            res = calibrate(X[drones == drone], cls, acquisition=job["acquisition"], settings=job["settings"],
+                            random_state=seed, backend_path=checkpoint).record_specimens([drone])
         res.save(out / "posteriors" / f"{name}.nc")
         for f in checkpoint.parent.glob(checkpoint.name + "*"):
             f.unlink()  # only needed to resume an interrupted run
@@ -60,10 +67,13 @@ def calibrate_class(job: dict) -> dict:
     corner_png, trace_png = out / "figures" / f"corner_{cls}.png", out / "figures" / f"trace_{cls}.png"
     with figure_style():
         res.plot_corner(corner_png)
-        res.plot_trace(trace_png)
+        if amortized:
+            trace_png = None  # no chain in the file: the amortized posterior's draws are exact
+        else:
+            res.plot_trace(trace_png)
     lines = res.lines()  # (n, E, 4, 2): frequency rad/s, amplitude m
     w_ref, _, _ = engine_lines(res.priors.centres)
-    return {"posterior": str(nc), "corner": str(corner_png), "trace": str(trace_png),
+    return {"posterior": str(nc), "corner": str(corner_png), "trace": None if trace_png is None else str(trace_png),
             "converged": bool(res.converged), "diagnostics": res.diagnostics, "summary": res.summary(),
             "n_profiles": int(np.sum(drones == ids[0])), "acquisition": res.acquisition.to_dict(),
             "measured_acquisition": res.measured_acquisition().to_dict(),

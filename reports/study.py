@@ -194,9 +194,21 @@ class Study(TrainingStages):
                                 fit_budget=p.calibration_fit_budget, n_acquisitions=p.calibration_draws,
                                 ramps_drawn=p.calibration_ramps_drawn, max_steps=p.calibration_max_steps,
                                 check_every=min(base.check_every, p.calibration_max_steps))
-        return {"cls": cls, "profiles": self.load_set(f"calibration_{cls}")[0],
+        return {"cls": cls, "method": self.calibration_method(cls, acquisition),
+                "profiles": self.load_set(f"calibration_{cls}")[0],
                 "drones": self.load_drones(f"calibration_{cls}", cls), "acquisition": acquisition,
                 "settings": settings, "seed": _stage_seed(self.cfg, "calibrate", cls), "out": str(self.out)}
+
+    def calibration_method(self, cls: str, acquisition) -> str:
+        """'amortized' or 'likelihood' (protocol.calibration_method; auto: amortized for a
+        measured acquisition when an estimator ships for the class and K)."""
+        from ..inference.amortized.shipped import shipped_path
+
+        method = self.cfg.protocol.calibration_method
+        if method == "auto":
+            ok = acquisition.phases == "uniform" and shipped_path(cls, acquisition.ramps).is_file()
+            method = "amortized" if ok else "likelihood"
+        return method
 
     def calibrate(self, cls: str, acquisition) -> dict:
         return self.cache.run(f"calibrate_{cls}", settings_key(self.calib_key, cls),

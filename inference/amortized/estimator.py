@@ -104,14 +104,14 @@ class AmortizedEstimator:
     def sample_u(self, profiles: np.ndarray, n: int, seed: int, *, strict: bool = True) -> tuple[np.ndarray, float]:
         """n draws of u from the amortized posterior given prepared profiles (M, L),
         inside the prior's support (draws outside are rejected and redrawn: leakage).
-        Returns (u (n, d), accepted share). When fewer than n fall inside after 50 n
+        Returns (u (n, d), accepted share). When fewer than n fall inside after 20 n
         tries: EstimatorError if ``strict``, else the rest filled with rejected draws."""
         torch.manual_seed(int(seed))
         cond = self.condition(profiles)
         out, rejected, tried, kept = [], [], 0, 0
         with torch.inference_mode():
-            while kept < n and tried < 50 * n:
-                k = max(2 * (n - kept), 256)
+            while kept < n and tried < 20 * n:
+                k = max(2 * (n - kept), 1024)
                 u = self.posterior.sample((k,), condition=cond).reshape(k, -1).double().cpu().numpy()
                 _, ok = self.label_free.vectors(self.label_free.from_unbounded(u))
                 ok &= np.all(np.isfinite(u), axis=1)

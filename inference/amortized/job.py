@@ -28,18 +28,20 @@ SBC_MEASUREMENTS = 5
 def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed: int = 0, workers: int = 1,
                     device: str = "auto", net_cfg: NetConfig = NetConfig(), train_cfg: TrainConfig = TrainConfig(),
                     post_budget: float | None = None, ratio_budget: float | None = None,
+                    sim_budget: float | None = None,
                     sbc_truths: int = 300, sbc_mcmc_truths: int = 0, mcmc_settings=None, shard_size: int = 500,
                     progress=None, log=print) -> AmortizedEstimator:
     """The whole job (module doc); writes the estimator to ``out`` and returns it.
     post_budget, ratio_budget: training seconds of each network (default: the
-    train_cfg's time budget)."""
+    train_cfg's time budget); sim_budget: simulation seconds (training then uses the
+    drones simulated by then)."""
     import torch
 
     t0 = time.perf_counter()
     work = Path(work)
     dev = device_of(device)
     paths = simulate_shards(work / "sims", spec, n_simulations, seed=child_seed(seed, "sims"), workers=workers,
-                            shard_size=shard_size, progress=progress, log=log)
+                            shard_size=shard_size, time_budget=sim_budget, progress=progress, log=log)
     t_sim = time.perf_counter() - t0
     vectors, profiles = load_shards(paths)
     ref = spec.reference
@@ -62,6 +64,7 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
     del x
     est.meta.update(n_simulations=int(len(u)), seed=int(seed), simulation_seconds=t_sim,
                     training={"config": train_cfg.to_dict(), "device": str(dev), **logs}, sbc={})
+    est.save(out)  # usable now; rewritten with its SBC figures below
     if sbc_truths:
         est.meta["sbc"] = estimator_sbc(est, sbc_truths, seed=child_seed(seed, "sbc"), workers=workers,
                                         mcmc_truths=sbc_mcmc_truths, mcmc_settings=mcmc_settings,

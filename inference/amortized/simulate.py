@@ -94,11 +94,13 @@ def shard_key(spec: SimulationSpec, seed, shard_size: int) -> str:
 
 
 def simulate_shards(folder, spec: SimulationSpec, n: int, *, seed=0, shard_size: int = 500, workers: int = 1,
-                    progress=None, log=None) -> list[Path]:
+                    time_budget: float | None = None, progress=None, log=None) -> list[Path]:
     """Simulate n drones into ``folder`` in shards of ``shard_size`` (module doc); the
-    shards that exist with the same key are kept. workers: processes. Returns the
-    shard paths (ceil(n / shard_size) of them)."""
-    from concurrent.futures import ProcessPoolExecutor
+    shards that exist with the same key are kept. workers: processes. time_budget:
+    seconds after which no new shard starts (the shards done so far are returned; a
+    rerun adds the rest). Returns the paths of the complete shards, in order."""
+    import time
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
     from ...radar.progress import progress_bar
 
@@ -131,18 +133,33 @@ def simulate_shards(folder, spec: SimulationSpec, n: int, *, seed=0, shard_size:
         log(f"simulations: {n_shards - len(todo)} of {n_shards} shards found in {folder}, reused")
     bar = progress_bar(total=n_shards, initial=n_shards - len(todo), desc=f"simulate {spec.class_name}",
                        unit="shard", progress=progress)
+    t0 = time.perf_counter()
+    over = lambda: time_budget is not None and time.perf_counter() - t0 > time_budget  # noqa: E731
     try:
         if workers > 1 and len(todo) > 1:
             with ProcessPoolExecutor(workers) as pool:
-                for _ in pool.map(_shard_job, todo):
-                    bar.update(1)
+                queue, running = list(todo), set()
+                while queue or running:
+                    while queue and len(running) < workers and not over():
+                        running.add(pool.submit(_shard_job, queue.pop(0)))
+                    if not running:
+                        break
+                    done, running = wait(running, return_when=FIRST_COMPLETED)
+                    for f in done:
+                        f.result()
+                        bar.update(1)
         else:
             for job in todo:
+                if over():
+                    break
                 _shard_job(job)
                 bar.update(1)
     finally:
         bar.close()
-    return paths
+    complete = [p for p in paths if p.is_file()]
+    if log and len(complete) < n_shards:
+        log(f"simulations: time budget of {time_budget:g} s reached with {len(complete)} of {n_shards} shards")
+    return complete
 
 
 def load_shards(paths) -> tuple[np.ndarray, np.ndarray]:

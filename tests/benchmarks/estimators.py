@@ -1,11 +1,12 @@
 """Train the shipped amortized estimators (or any set of them) side by side.
 
-python tests/benchmarks/estimators.py --out DIR [--jobs HELI:32:24000:4,QUAD:32:24000:6,...]
-    [--device auto] [--posterior-budget 150] [--ratio-budget 90] [--sbc-truths 300]
+python tests/benchmarks/estimators.py --out DIR [--work WORK] [--jobs CLASS:K:N:WORKERS,...]
+    [--device auto] [--sim-budget S] [--posterior-budget S] [--ratio-budget S] [--sbc-truths 300]
 
 Each job CLASS:K:SIMULATIONS:WORKERS runs in its own process (simulation on WORKERS
 processes, then training on the device, then its SBC), writing DIR/<class>-k<K>.zip
-with its work folder (resumable) and log under DIR/work/. This is
+(first without, then with its SBC figures), its work folder (resumable) and log under
+WORK (default DIR/work). This is
 how the estimators in mdaug/inference/amortized/data were made (the README's
 calibration page gives the command line and the figures each job printed).
 """
@@ -25,8 +26,8 @@ warnings.simplefilter("ignore")
 DEFAULT_JOBS = "QUAD:32:24000:6,HELI:32:24000:4,QUAD:4:40000:2,HELI:4:40000:2,QUAD:1:40000:1,HELI:1:40000:1"
 
 
-def one(cls: str, ramps: int, n: int, workers: int, out: str, device: str, post_budget: float,
-        ratio_budget: float, sbc_truths: int, seed: int, threads: int) -> None:
+def one(cls: str, ramps: int, n: int, workers: int, out: str, work: str, device: str, sim_budget: float,
+        post_budget: float, ratio_budget: float, sbc_truths: int, seed: int, threads: int, shard_size: int) -> None:
     import torch
 
     from mdaug.generator.acquisition import Acquisition
@@ -36,8 +37,8 @@ def one(cls: str, ramps: int, n: int, workers: int, out: str, device: str, post_
 
     torch.set_num_threads(threads)
     name = f"{cls.lower()}-k{ramps}"
-    os.makedirs(os.path.join(out, "work"), exist_ok=True)
-    log_path = os.path.join(out, "work", f"{name}.log")
+    os.makedirs(work, exist_ok=True)
+    log_path = os.path.join(work, f"{name}.log")
 
     def log(msg):
         line = f"[{time.strftime('%H:%M:%S')}] {msg}"
@@ -47,10 +48,10 @@ def one(cls: str, ramps: int, n: int, workers: int, out: str, device: str, post_
 
     spec = SimulationSpec(cls, Acquisition.measured(ramps), 10)
     cfg = default_training()
-    est = train_estimator(spec, n, os.path.join(out, "work", name), os.path.join(out, f"{name}.zip"), seed=seed,
+    est = train_estimator(spec, n, os.path.join(work, name), os.path.join(out, f"{name}.zip"), seed=seed,
                           workers=workers, device=device, net_cfg=default_nets(cls),
                           train_cfg=cfg, post_budget=post_budget, ratio_budget=ratio_budget,
-                          sbc_truths=sbc_truths, progress=False, log=log)
+                          sbc_truths=sbc_truths, shard_size=shard_size, progress=False, log=log)
     log(f"done: {est.meta['job_seconds']:.0f} s")
 
 
@@ -59,25 +60,31 @@ def main(argv=None) -> int:
     p.add_argument("--out", required=True)
     p.add_argument("--jobs", default=DEFAULT_JOBS)
     p.add_argument("--device", default="auto")
+    p.add_argument("--work", default=None)
+    p.add_argument("--sim-budget", type=float, default=None)
     p.add_argument("--posterior-budget", type=float, default=150.0)
     p.add_argument("--ratio-budget", type=float, default=90.0)
     p.add_argument("--sbc-truths", type=int, default=300)
     p.add_argument("--seed", type=int, default=2026)
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--shard-size", type=int, default=200)
     p.add_argument("--one", nargs=4, metavar=("CLASS", "K", "N", "WORKERS"), help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
+    work = a.work or os.path.join(a.out, "work")
     if a.one:
         cls, k, n, w = a.one
-        one(cls, int(k), int(n), int(w), a.out, a.device, a.posterior_budget, a.ratio_budget, a.sbc_truths,
-            a.seed, a.threads)
+        one(cls, int(k), int(n), int(w), a.out, work, a.device, a.sim_budget, a.posterior_budget, a.ratio_budget,
+            a.sbc_truths, a.seed, a.threads, a.shard_size)
         return 0
     procs = []
     for job in a.jobs.split(","):
         cls, k, n, w = job.split(":")
-        cmd = [sys.executable, __file__, "--out", a.out, "--device", a.device, "--posterior-budget",
+        cmd = [sys.executable, __file__, "--out", a.out, "--work", work, "--device", a.device,
+               *(["--sim-budget", str(a.sim_budget)] if a.sim_budget is not None else []), "--posterior-budget",
                str(a.posterior_budget), "--ratio-budget", str(a.ratio_budget), "--sbc-truths", str(a.sbc_truths),
-               "--seed", str(a.seed), "--threads", str(a.threads), "--one", cls, k, n, w]
+               "--seed", str(a.seed), "--threads", str(a.threads), "--shard-size", str(a.shard_size),
+               "--one", cls, k, n, w]
         procs.append((job, subprocess.Popen(cmd)))
     status = 0
     for job, proc in procs:
