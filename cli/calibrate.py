@@ -297,7 +297,7 @@ def add_calibrate(sub, parents, help):
                    help="amortized: the class's trained estimator (simulation-based; the amortized posterior, "
                         "and nlopt + emcee on the likelihood learned from the same simulations); likelihood: "
                         "the closed-form likelihood with nlopt + a sampler (auto: amortized for measured "
-                        "acquisitions, likelihood for the published single chirp and --population)")
+                        "acquisitions, likelihood for the published single chirp and --population) (default: %(default)s)")
     g.add_argument("--estimator", type=Path, default=None,
                    help="estimator ZIP of mdaug train-estimator (default: the shipped one for the class and K)")
     g.add_argument("--route", choices=("amortized", "emcee"), default=None,

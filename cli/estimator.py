@@ -111,7 +111,8 @@ def run_sbc(args) -> int:
     from .guard import Output, check_paths
 
     cls = _class(args.class_name)
-    check_paths(inputs=[("--estimator", args.estimator)], outputs=[Output("--json", args.json, "json")])
+    check_paths(inputs=[("--estimator", args.estimator)], outputs=[Output("--json", args.json, "json"),
+                                                                    Output("--figure", args.figure, "plot")])
     est = find(cls, Acquisition.measured(args.ramps), path=args.estimator)
     settings = CalibrationSettings(progress=False, time_budget=args.time_budget)
     out = estimator_sbc(est, args.truths, seed=args.seed, workers=args.workers, mcmc_truths=args.emcee_truths,
@@ -123,6 +124,11 @@ def run_sbc(args) -> int:
         widths = " ".join(f"{k.split()[2][0]}{k.split()[1]}{k[-3:]} {v:.2f}/{s['prior_width_over_truth'][k]:.2f}"
                           for k, v in s["width_over_truth"].items() if k.startswith("line"))
         result(f"  median 90% width / truth (posterior/prior): {widths}")
+    if args.figure is not None:
+        from ..inference.amortized.plots import sbc_figure
+
+        sbc_figure(out, args.figure, f"{cls} K = {args.ramps}: SBC on {args.truths} simulated drones")
+        result(f"wrote {args.figure}")
     if args.json is not None:
         from ..radar.io import atomic_write
 
@@ -147,11 +153,11 @@ def add_train(sub, parents, help):
                    help="simulated drones (default: %(default)s)")
     p.add_argument("--measurements", type=_meas, default=10, metavar="M",
                    help="most measurements of one drone the estimator takes (default: %(default)s)")
-    p.add_argument("--workers", type=positive_int, default=1, metavar="N", help="simulation processes")
+    p.add_argument("--workers", type=positive_int, default=1, metavar="N", help="simulation processes (default: %(default)s)")
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto",
-                   help="where to train (auto: a GPU when present)")
-    p.add_argument("--seed", type=seed_int, default=0)
-    p.add_argument("--epochs", type=positive_int, default=None, metavar="N", help="most epochs per network")
+                   help="where to train (auto: a GPU when present) (default: %(default)s)")
+    p.add_argument("--seed", type=seed_int, default=0, help="seed of simulations and training (default: %(default)s)")
+    p.add_argument("--epochs", type=positive_int, default=None, metavar="N", help="most epochs per network (default: 300, early stopping first)")
     p.add_argument("--posterior-budget", type=positive_float, default=None, metavar="SECONDS",
                    help="training seconds of the posterior network (default: none)")
     p.add_argument("--ratio-budget", type=positive_float, default=None, metavar="SECONDS",
@@ -170,16 +176,20 @@ def add_sbc(sub, parents, help):
                              "measurements each): outer-10% share (0.10 when honest), 90% coverage, rank "
                              "chi-square, TARP, and the median 90% width over the truth beside the prior's.")
     p.add_argument("--class", dest="class_name", required=True, metavar="CLASS", help="HELI or QUAD")
-    p.add_argument("--ramps", type=positive_int, required=True, metavar="K")
+    p.add_argument("--ramps", type=positive_int, required=True, metavar="K", help="ramps per frame of the data")
     p.add_argument("--estimator", type=Path, default=None, help="estimator ZIP (default: the shipped one)")
-    p.add_argument("--truths", type=positive_int, default=300, metavar="N")
+    p.add_argument("--truths", type=positive_int, default=300, metavar="N",
+                   help="fresh simulated drones, 5 measurements each (default: %(default)s)")
     p.add_argument("--emcee-truths", type=integer, default=0, metavar="N",
-                   help="of those, how many also through nlopt + emcee on the learned likelihood")
+                   help="of those, how many also through nlopt + emcee on the learned likelihood (default: %(default)s)")
     p.add_argument("--time-budget", type=positive_float, default=60.0, metavar="SECONDS",
                    help="emcee seconds per drone (default: %(default)s)")
-    p.add_argument("--workers", type=positive_int, default=1, metavar="N")
-    p.add_argument("--seed", type=seed_int, default=1)
-    p.add_argument("--json", type=Path, default=None, help="write the figures as JSON")
+    p.add_argument("--workers", type=positive_int, default=1, metavar="N",
+                   help="simulation processes (default: %(default)s)")
+    p.add_argument("--seed", type=seed_int, default=1, help="seed of the SBC drones (default: %(default)s)")
+    p.add_argument("--json", type=Path, default=None, help="write the figures as JSON (default: none)")
+    p.add_argument("--figure", type=Path, default=None,
+                   help="write the rank histograms and coverage curves (default: none)")
     p.set_defaults(func=run_sbc)
     return p
 

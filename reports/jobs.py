@@ -80,10 +80,19 @@ def calibrate_class(job: dict) -> dict:
             "lines": {"frequency_q": np.quantile(lines[..., 0], [0.05, 0.5, 0.95], axis=0).tolist(),
                       "amplitude_q": np.quantile(lines[..., 1], [0.05, 0.5, 0.95], axis=0).tolist(),
                       "reference_frequency": np.sort(w_ref, axis=-1).tolist()},
+            "sbc": _estimator_sbc(res) if amortized else None,
             "population": str(pop_path), "population_report": pop.report(), "population_spreads": pop.summary(),
             "population_assumed": bool(pop.assumed), "population_converged": bool(pop.converged),
             "drones": ids, "drones_converged": [bool(r.converged) for r in results],
             "seconds": time.perf_counter() - t0}
+
+
+def _estimator_sbc(res) -> dict | None:
+    """The SBC the calibration's estimator passed (stored in its file): the amortized
+    route's outer share, pooled rank p and truths."""
+    sbc = res.diagnostics.get("estimator", {}).get("sbc", {}).get("amortized")
+    return None if not sbc else {"outer_share": sbc.get("outer_share"), "pooled_p": sbc.get("pooled_p"),
+                                 "n_replicates": sbc.get("n_replicates")}
 
 
 def fit_predict(job: dict) -> dict:

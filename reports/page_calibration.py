@@ -112,7 +112,13 @@ def calibration_section(r: dict, figs: Figures, w: Html, report_dir: Path) -> st
         for prefix in ("NOT CONVERGED: ", "converged: ", "Converged: "):
             reason = reason[len(prefix):] if reason.startswith(prefix) else reason
         sampler = d.get("sampler", "emcee")
-        if sampler == "smc":
+        if sampler == "amortized":
+            chain = (f"amortized posterior ({fmt(d.get('amortized_seconds', 0) * 1e3)} ms, "
+                     f"{fmt(100 * d.get('amortized_inside_prior', 0))}% of its draws inside the prior); "
+                     f"emcee on the learned likelihood beside it: {fmt(d.get('n_walkers'))} walkers x "
+                     f"{fmt(d.get('chain_steps'))} steps (chain = "
+                     f"{w.num(k + '.steps_over_tau', d.get('steps_over_tau'), 1)} x max tau)")
+        elif sampler == "smc":
             chain = f"SMC, {fmt(d.get('smc_n_particles'))} particles, {fmt(d.get('smc_stages'))} stages"
         else:
             chain = (f"{fmt(d.get('n_walkers'))} walkers x {fmt(d.get('chain_steps'))} steps (chain = "

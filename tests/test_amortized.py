@@ -214,3 +214,55 @@ def test_emcee_route_on_the_learned_likelihood_stays_in_the_prior(tiny):
     assert np.all(np.isfinite(post.space.log_prior(s)))
     assert np.isfinite(fit["log_post"]) and fit["log_post"] >= fit["start_log_post"] - 1e-9
     assert run.reason  # converged or says why not
+
+
+# ---- the calibrate verb ---------------------------------------------------------------------------
+def _profile_file(path, profiles, cls="HELI", ramps=4):
+    np.savez(path, profiles=profiles, labels=np.array([cls] * len(profiles)), ramps_per_frame=np.array(ramps))
+    return path
+
+
+def test_calibrate_verb_writes_an_amortized_posterior(tiny, tmp_path, capsys):
+    from mdaug.cli import main
+    from mdaug.inference import CalibrationResult
+
+    est, path = tiny
+    _, y = simulate(est.spec, 1, 21)
+    data = _profile_file(tmp_path / "heli.npz", y[0][:3])
+    out = tmp_path / "post.nc"
+    status = main(["calibrate", str(data), "--class", "HELI", "--out", str(out), "--estimator", str(path),
+                   "--max-steps", "200", "--time-budget", "20", "--seed", "5"])
+    text = capsys.readouterr()
+    assert status == 0, text.err
+    assert "posterior used by the strategies: amortized" in text.out
+    assert "emcee on the learned likelihood" in text.out
+    res = CalibrationResult.load(out, class_name="HELI")  # check_content: variables, dims, prior bounds
+    assert res.amortized and res.marginal and res.n_measurements == 3
+    assert res.draws().shape == (4000, 13)
+    assert "other_route" in res.idata.groups()
+    assert res.acquisition.ramps == 4
+
+
+def test_calibrate_verb_refuses_what_the_estimator_cannot_take(tiny, tmp_path, refused):
+    est, path = tiny
+    _, y = simulate(est.spec, 1, 22)
+    inputs, out = tmp_path / "in", tmp_path / "out"
+    inputs.mkdir()
+    out.mkdir()
+    nan = y[0][:3].copy()
+    nan[1, 5] = np.nan
+    bad = _profile_file(inputs / "nan.npz", nan)
+    k7 = _profile_file(inputs / "k7.npz", y[0][:3], ramps=7)
+    quad = _profile_file(inputs / "quad.npz", y[0][:3], cls="QUAD")
+    good = _profile_file(inputs / "good.npz", y[0][:3])
+    post = str(out / "p.nc")
+    refused(["calibrate", str(bad), "--class", "HELI", "--out", post, "--estimator", str(path)], inputs, out,
+            ["nan.npz", "NaN"])
+    refused(["calibrate", str(k7), "--class", "HELI", "--out", post], inputs, out,
+            ["no shipped estimator for class HELI at K = 7", "mdaug train-estimator --class HELI --ramps 7"])
+    refused(["calibrate", str(quad), "--class", "QUAD", "--out", post, "--estimator", str(path)], inputs, out,
+            ["spec.class_name", "'QUAD'"])
+    refused(["calibrate", str(good), "--class", "HELI", "--out", post, "--estimator", str(path),
+             "--likelihood", "marginal"], inputs, out, ["--likelihood applies to --method likelihood"])
+    refused(["calibrate", str(good), "--class", "HELI", "--out", post, "--estimator", str(inputs / "none.zip")],
+            inputs, out, ["none.zip"])

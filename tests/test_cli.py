@@ -31,7 +31,8 @@ def subparsers():
 # ---- help ------------------------------------------------------------------------------------
 def test_every_option_of_every_verb_explains_itself():
     parser, subs = subparsers()
-    assert set(subs) == set(verbs()) == {"simulate", "process", "calibrate", "augment", "train", "evaluate",
+    assert set(subs) == set(verbs()) == {"simulate", "process", "calibrate", "train-estimator", "sbc", "augment",
+                                         "train", "evaluate",
                                          "sweep", "baseline", "run"}
     for name, p in [("mdaug", parser), *subs.items()]:
         for action in p._actions:

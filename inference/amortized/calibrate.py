@@ -28,7 +28,7 @@ from ...radar import RadarConfig
 from ...radar.seeds import child_seed, seed_sequence
 from ..likelihood import prepare_measured
 from ..priors import SHARED
-from ..result import FORMAT, CalibrationResult, import_arviz
+from ..result import FORMAT, IDENTIFIED_RATIO, CalibrationResult, import_arviz
 from .shipped import find
 
 ROUTES = ("amortized", "emcee")
@@ -81,6 +81,9 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
                          "acceptance_mean": float(run.acceptance.mean()), "n_walkers": int(run.chain.shape[1]),
                          "ess_min": float(run.ess.min()), "rhat_max": _rhat(run, names), "fit": fit,
                          "evaluations": int(post.n_calls)}
+        diag.update({k: diag["emcee"][k] for k in ("n_walkers", "steps_over_tau", "ess_min", "acceptance_mean",
+                                                    "tau_max")}, chain_steps=diag["emcee"]["steps"])
+    diag["seconds"] = time.perf_counter() - t0
     diag["out_of_range"], diag["out_of_range_why"] = _out_of_range(lf, x_amortized, x_emcee, inside)
     chosen = x_amortized if route == "amortized" else x_emcee
     if route == "amortized":
@@ -98,7 +101,7 @@ def _estimator_info(est) -> dict:
     m = est.meta
     return {"class": est.class_name, "ramps": est.spec.acquisition.ramps, "simulations": m.get("n_simulations"),
             "simulator": m["spec"].get("simulator"), "sbc": {r: {k: m["sbc"][r].get(k) for k in
-                                                                 ("outer_share", "coverage90_range", "n_replicates")}
+                                                                 ("outer_share", "coverage90_range", "n_replicates", "pooled_p")}
                                                              for r in m.get("sbc", {}) if isinstance(m["sbc"][r], dict)
                                                              and "outer_share" in m["sbc"][r]}}
 
@@ -167,5 +170,10 @@ def _result(ref, est, data, shifts, acquisition, radar, chosen, other, diag, n_d
             "fit": diag.get("emcee", {}).get("fit", {}), "best_fit": median.tolist(),
             "recentred_shifts": np.asarray(shifts).tolist(), "diagnostics": diag,
             "noise_model": "learned from the scene simulator (every nuisance drawn as a measurement draws it)"}
+    idata.posterior.attrs["mdaug"] = json.dumps(meta, default=float)
+    res = CalibrationResult(idata)
+    table = res.summary()
+    diag["identified"] = {k: bool(v) for k, v in table["identified"].items() if table.loc[k, "kind"] == "linear"}
+    diag["identified_ratio"] = IDENTIFIED_RATIO
     idata.posterior.attrs["mdaug"] = json.dumps(meta, default=float)
     return CalibrationResult(idata)

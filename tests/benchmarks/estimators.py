@@ -1,5 +1,6 @@
 """Train the shipped amortized estimators (or any set of them) side by side.
 
+python tests/benchmarks/estimators.py --cost
 python tests/benchmarks/estimators.py --out DIR [--work WORK] [--jobs CLASS:K:N:WORKERS,...]
     [--device auto] [--sim-budget S] [--posterior-budget S] [--ratio-budget S] [--sbc-truths 300]
 
@@ -55,9 +56,54 @@ def one(cls: str, ramps: int, n: int, workers: int, out: str, work: str, device:
     log(f"done: {est.meta['job_seconds']:.0f} s")
 
 
+def cost(n_drones: int = 200, n_train: int = 2000, ramps: int = 32) -> None:
+    """Print, on 1 thread: simulation ms per training example (one drone, 5 and 10
+    measurements through the scene simulator and the chain, batched n_drones per call)
+    and training seconds per epoch of each network on n_train examples (CPU)."""
+    import numpy as np
+    import torch
+    from threadpoolctl import threadpool_limits
+
+    from mdaug.generator.acquisition import Acquisition
+    from mdaug.inference.amortized.estimator import AmortizedEstimator
+    from mdaug.inference.amortized.shipped import default_nets, default_training
+    from mdaug.inference.amortized.simulate import SimulationSpec, simulate
+    from mdaug.inference.amortized.train import fit, posterior_loss, ratio_loss
+
+    from dataclasses import replace
+
+    torch.set_num_threads(1)
+    with threadpool_limits(1):
+        for cls in ("HELI", "QUAD"):
+            for m in (5, 10):
+                spec = SimulationSpec(cls, Acquisition.measured(ramps), m)
+                simulate(spec, 4, 0)
+                t0 = time.process_time()
+                x, y = simulate(spec, n_drones, 1)
+                ms = (time.process_time() - t0) / n_drones * 1e3
+                print(f"simulation {cls} K={ramps}, {m} measurements: {ms:.1f} ms per example (CPU time, 1 thread)",
+                      flush=True)
+            spec = SimulationSpec(cls, Acquisition.measured(ramps), 10)
+            x, y = simulate(spec, 64, 2)
+            reps = -(-n_train // 64)
+            from mdaug.inference.amortized.target import LabelFree
+
+            ref = spec.reference
+            label_free = LabelFree(ref.n_engines, spec.priors(), ref.to_array())
+            u = torch.as_tensor(np.tile(label_free.to_unbounded(label_free.quantities(x)), (reps, 1))[:n_train],
+                                dtype=torch.float32)
+            xt = torch.as_tensor(np.tile(y, (reps, 1, 1))[:n_train])
+            est = AmortizedEstimator.build(spec, default_nets(cls), u, xt)
+            cfg = replace(default_training(), max_epochs=2, patience=10)
+            for name, net, loss in (("posterior", est.posterior, posterior_loss), ("ratio", est.ratio, ratio_loss)):
+                log = fit(net, loss, u, xt, cfg, 0, progress=False)
+                print(f"training {cls} {name}: {log.seconds / log.epochs:.1f} s per epoch of {n_train} examples "
+                      f"({log.seconds / log.epochs / n_train * 1e3:.2f} ms per example-epoch, 1 thread)", flush=True)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", required=True)
+    p.add_argument("--out", default=None)
     p.add_argument("--jobs", default=DEFAULT_JOBS)
     p.add_argument("--device", default="auto")
     p.add_argument("--work", default=None)
@@ -68,8 +114,14 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=2026)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--shard-size", type=int, default=200)
+    p.add_argument("--cost", action="store_true", help="print simulation and training costs on 1 thread")
     p.add_argument("--one", nargs=4, metavar=("CLASS", "K", "N", "WORKERS"), help=argparse.SUPPRESS)
     a = p.parse_args(argv)
+    if a.cost:
+        cost()
+        return 0
+    if a.out is None:
+        p.error("--out is required")
     os.makedirs(a.out, exist_ok=True)
     work = a.work or os.path.join(a.out, "work")
     if a.one:
