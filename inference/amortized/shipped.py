@@ -21,10 +21,10 @@ DATA = Path(__file__).with_name("data")
 
 
 def default_nets(class_name: str) -> NetConfig:
-    """Network sizes: QUAD (35 label-free quantities) gets a wider embedding and flow."""
+    """Network sizes: QUAD (35 label-free quantities) gets a wider set embedding and flow
+    (the per-profile CNN, which sets the training cost, is the same)."""
     if class_name.upper() == "QUAD":
-        return NetConfig(channels=(16, 32, 64, 64), trial_out=128, set_hidden=256, set_out=128, flow_hidden=128,
-                         flow_transforms=6, ratio_hidden=256)
+        return NetConfig(set_out=96, flow_hidden=96, ratio_hidden=160)
     return NetConfig()
 
 
