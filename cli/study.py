@@ -134,6 +134,9 @@ def run_study(args) -> int:
         cfg.simulation = dataclasses.replace(cfg.simulation, ramps=args.ramps)
         check_study_ramps(cfg)
     cfg.validate()  # everything checked before the output folder exists
+    from .study_sizes import check_study_sizes
+
+    check_study_sizes(cfg)  # the config's sizes and its files', under the options' one bound
     data_files = [(f"[data] {group}.{name}", path) for group in ("calibration", "select", "test")
                   for name, path in (getattr(cfg.data, group) or {}).items()]
     check_paths(inputs=[("--config", args.config), *data_files],

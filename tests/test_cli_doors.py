@@ -89,6 +89,28 @@ def root(tmp_path_factory):
     atomic_savez(d / "spec_path.npz", profiles=x, labels=LABELS, specimen=np.array(["../../in/m"] * 20))
     atomic_savez(d / "spec_dot.npz", profiles=x, labels=LABELS, specimen=np.array([".x"] * 20))
     atomic_savez(d / "spec_case.npz", profiles=x, labels=LABELS, specimen=np.array(["a", "A"] * 10))
+    # ---- sizes read from files and configs ----
+    atomic_savez(d / "k_inf.npz", profiles=x, labels=LABELS, ramps_per_frame=np.array(np.inf))
+    atomic_savez(d / "k_nan.npz", profiles=x, labels=LABELS, ramps_per_frame=np.array(np.nan))
+    atomic_savez(d / "k_text.npz", profiles=x, labels=LABELS, ramps_per_frame=np.array(["4"]))
+    atomic_savez(d / "k_big.npz", profiles=x, labels=LABELS, ramps_per_frame=np.array(10 ** 9))
+    atomic_savez(d / "k_acq_inf.npz", profiles=x, labels=LABELS, acquisition=np.array('{"ramps": Infinity}'))
+    atomic_savez(d / "k_acq_null.npz", profiles=x, labels=LABELS, acquisition=np.array('{"ramps": null}'))
+    _config(d, "k_big.toml", {"new": "k_big.npz"})
+    _config(d, "k_inf.toml", {"new": "k_inf.npz"})
+    big = 10 ** 12
+    for name, text in {"ceiling": f"[simulation]\nceiling_per_class = {big}\n",
+                       "drones": f"[simulation]\ncalibration_drones = {big}\n",
+                       "n_new": f"[simulation]\nn_new = {{ HELI = {big}, QUAD = 5 }}\n",
+                       "sim_ramps": f"[simulation]\nramps = {big}\n",
+                       "specimens": f"[simulation]\nnew_specimens = {big}\n",
+                       "cnn_n": f"[protocol]\ncnn_n_per_class = {big}\n",
+                       "epochs": f"[protocol]\ncnn_epochs = {big}\n",
+                       "n_boot": f"[protocol]\nn_boot = {big}\n",
+                       "steps": f"[protocol]\ncalibration_max_steps = {big}\n",
+                       "sweep": f"[protocol]\nsweep_n_per_class = {big}\n"}.items():
+        (d / f"size_{name}.toml").write_text(text)
+    _config(d, "size_measured_steps.toml", extra=f"[protocol]\ncalibration_max_steps = {big}\n")
     # ---- population files ----
     _save_population(d / "pop.npz")
     _save_population(d / "pop_no_mu.npz", edit=lambda a: _drop(a, "mu"))
@@ -153,6 +175,32 @@ CASES = [
                       "--out", "{o}/p.npz"], ["spec_dot.npz: field 'specimen' drone id = '.x'", "dot"]),
     ("drone-id-case", ["calibrate", "{d}/spec_case.npz", "--class", "HELI", "--population", "--engines", "1",
                        "--out", "{o}/p.npz"], ["spec_case.npz: field 'specimen'", "differ only in case"]),
+    # ---- sizes in files and configs: refused by name before any work, like the options' sizes ----
+    ("k-inf", ["calibrate", "{d}/k_inf.npz", "--class", "HELI", "--out", "{o}/p.nc"],
+     ["k_inf.npz: field 'ramps_per_frame' must be one integer >= 1", "got inf"]),
+    ("k-nan", ["calibrate", "{d}/k_nan.npz", "--class", "HELI", "--out", "{o}/p.nc"],
+     ["k_nan.npz: field 'ramps_per_frame'", "got nan"]),
+    ("k-text", ["calibrate", "{d}/k_text.npz", "--class", "HELI", "--out", "{o}/p.nc"],
+     ["k_text.npz: field 'ramps_per_frame'"]),
+    ("k-acquisition-inf", ["calibrate", "{d}/k_acq_inf.npz", "--class", "HELI", "--out", "{o}/p.nc"],
+     ["k_acq_inf.npz: field 'acquisition'"]),
+    ("k-acquisition-null", ["calibrate", "{d}/k_acq_null.npz", "--class", "HELI", "--out", "{o}/p.nc"],
+     ["k_acq_null.npz: field 'acquisition'"]),
+    ("k-inf-study", _run("k_inf.toml"), ["k_inf.npz: field 'ramps_per_frame'"]),
+    ("k-huge-study", _run("k_big.toml"), ["k_big.npz: field 'ramps_per_frame' 1,000,000,000", "would take"]),
+    ("size-ceiling", _run("size_ceiling.toml"), ["size_ceiling.toml: [simulation] ceiling_per_class "
+                                                 "1,000,000,000,000"]),
+    ("size-drones", _run("size_drones.toml"), ["size_drones.toml: [simulation] calibration_drones"]),
+    ("size-n-new", _run("size_n_new.toml"), ["size_n_new.toml: [simulation] n_new.HELI 1,000,000,000,000"]),
+    ("size-ramps", _run("size_sim_ramps.toml"), ["size_sim_ramps.toml: [simulation] ramps 1,000,000,000,000"]),
+    ("size-specimens", _run("size_specimens.toml"), ["size_specimens.toml: [simulation] new_specimens"]),
+    ("size-cnn-n", _run("size_cnn_n.toml"), ["size_cnn_n.toml: [protocol] cnn_n_per_class 1,000,000,000,000"]),
+    ("size-epochs", _run("size_epochs.toml"), ["size_epochs.toml: [protocol] cnn_epochs 1,000,000,000,000"]),
+    ("size-n-boot", _run("size_n_boot.toml"), ["size_n_boot.toml: [protocol] n_boot 1,000,000,000,000"]),
+    ("size-steps", _run("size_steps.toml"), ["size_steps.toml: [protocol] calibration_max_steps"]),
+    ("size-sweep", _run("size_sweep.toml"), ["size_sweep.toml: [protocol] sweep_n_per_class"]),
+    ("size-steps-measured", _run("size_measured_steps.toml"), ["size_measured_steps.toml: [protocol] "
+                                                               "calibration_max_steps"]),
     # ---- population files: the checked NPZ reader ----
     ("pop-missing-field", [*AUG, "HELI={d}/pop_no_mu.npz"], ["pop_no_mu.npz: not a population file", "'mu'"]),
     ("pop-no-diagnostics", [*AUG, "HELI={d}/pop_no_diag.npz"], ["pop_no_diag.npz: field 'meta' lacks",
@@ -183,7 +231,7 @@ CASES = [
 
 
 def test_the_table_is_large_and_ids_unique():
-    assert len(CASES) >= 40
+    assert len(CASES) >= 60
     assert len({c[0] for c in CASES}) == len(CASES)
 
 
