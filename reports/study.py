@@ -45,6 +45,7 @@ from . import jobs, statistics, verdicts
 from .cache import StageCache, settings_key
 from .config import StudyConfig
 from .executor import make_executor
+from .identity import check_study_folder, claim, study_key
 from .study_training import TrainingStages, chosen_spec
 
 
@@ -59,14 +60,16 @@ class Study(TrainingStages):
     def __init__(self, cfg: StudyConfig, out: Path, log=print, invocation: str | None = None):
         self.cfg = cfg.validate(check_files=False)
         self.invocation = invocation
-        self.out = Path(out)
+        self.out = Path(out).absolute()  # its records do not depend on the working directory
+        check_study_folder(self.out, cfg)  # another study's folder: refused before anything is written
         self.out.mkdir(parents=True, exist_ok=True)
         for sub in ("data", "posteriors", "models", "figures"):
             (self.out / sub).mkdir(exist_ok=True)
         self.log = log
         self.cache = StageCache(self.out, log)
+        claim(self.out, cfg)
         c, p = cfg.to_dict(), cfg.to_dict()["protocol"]
-        self.key = settings_key(c["seed"], c["classes"], c["data"], c["simulation"], p["acquisition_ramps"])
+        self.key = study_key(cfg)
         self.calib_key = settings_key(self.key, c["quick"], {k: v for k, v in p.items() if k.startswith("calibration")})
         self.cand_key = settings_key(self.calib_key, [p[k] for k in ("sigma_p", "specimen_widths", "models",
                                                                      "sweep_n_per_class", "strategies",

@@ -59,7 +59,8 @@ class TrainingStages:
         return out
 
     def _cnn_key(self, job: dict) -> str:
-        return settings_key(self.cnn_key, job["name"], job["spec"].to_dict(), job["run_seeds"])
+        # the spec's files by their place in the study folder: a moved folder, or another working directory, resumes
+        return settings_key(self.cnn_key, job["name"], self.cache.relative(job["spec"].to_dict()), job["run_seeds"])
 
     def cnns(self, cnn_jobs: dict, executor) -> dict:
         """Every strategy's stage result (cached; uncached strategies go to the executor together)."""
