@@ -85,6 +85,11 @@ def root(tmp_path_factory):
         _config(d, f"name_{name}.toml", {test: "m.npz"})
     _config(d, "name_twice.toml", {"new": "m.npz", "NEW": "m.npz"})
     (d / "class_path.toml").write_text('classes = ["../HELI"]\n')
+    (d / "calib_key.toml").write_text('[data]\ncalibration = { "../HELI" = "m.npz", QUAD = "m.npz" }\n'
+                                      'test = { new = "m.npz" }\n')
+    (d / "select_key.toml").write_text('[data]\ncalibration = { HELI = "m.npz", QUAD = "m.npz" }\n'
+                                       'select = { "/HELI" = "m.npz", QUAD = "m.npz" }\ntest = { new = "m.npz" }\n')
+    _config(d, "name_trailing_dot.toml", {"new.": "m.npz"})
     # ---- drone ids (field 'specimen') become file names of the drones' posteriors ----
     atomic_savez(d / "spec_path.npz", profiles=x, labels=LABELS, specimen=np.array(["../../in/m"] * 20))
     atomic_savez(d / "spec_dot.npz", profiles=x, labels=LABELS, specimen=np.array([".x"] * 20))
@@ -169,6 +174,9 @@ CASES = [
     ("name-calibration-prefix", _run("name_calib_case.toml"), ["test set name = 'Calibration_QUAD'"]),
     ("name-twice-by-case", _run("name_twice.toml"), ["[data] test set names", "'new' and 'NEW' differ only in case"]),
     ("name-class-path", _run("class_path.toml"), ["class_path.toml: classes[0] = '../HELI'", "path separator"]),
+    ("name-calibration-key", _run("calib_key.toml"), ["calib_key.toml: [data] calibration class name = '../HELI'"]),
+    ("name-select-key", _run("select_key.toml"), ["select_key.toml: [data] select class name = '/HELI'"]),
+    ("name-trailing-dot", _run("name_trailing_dot.toml"), ["[data] test set name = 'new.'", "ends with a dot"]),
     ("drone-id-path", ["calibrate", "{d}/spec_path.npz", "--class", "HELI", "--population", "--engines", "1",
                        "--out", "{o}/p.npz"], ["spec_path.npz: field 'specimen' drone id = '../../in/m'"]),
     ("drone-id-dot", ["calibrate", "{d}/spec_dot.npz", "--class", "HELI", "--population", "--engines", "1",
