@@ -236,7 +236,8 @@ def run_population(args, profiles, drones, settings, acquisition) -> int:
             data, _ = prepare_measured(rows, RadarConfig(), settings.normalisation)
             changed = [] if np.array_equal(np.asarray(old.idata.observed_data["y"]), data) else ["measurements"]
             stored = old.meta.get(REUSE_FIELD) or {}
-            changed += [name for name in key if stored.get(name) != key[name]] if stored else ["options (none recorded)"]
+            changed += ([name for name in key if stored.get(name) != key[name]] if stored
+                        else ["options (none recorded)"])
             if not changed:
                 res = old
                 result(f"drone {drone}: reused {path} (same measurements, engines, seed, sampler, calibration "

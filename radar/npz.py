@@ -115,8 +115,9 @@ def check_field(arrays: dict, f: Field, src, sizes: dict | None = None) -> np.nd
     for axis, (got, spec) in enumerate(zip(a.shape, f.shape)):
         expected = sizes.setdefault(spec, got) if isinstance(spec, str) else spec
         if expected is not None and got != expected:
+            named = f" (as its {spec!r} elsewhere in the file)" if isinstance(spec, str) else ""
             raise DataFileError(f"{src}: field {f.name!r} has shape {a.shape}; expected {expected} along axis "
-                                f"{axis}" + (f" (as its {spec!r} elsewhere in the file)" if isinstance(spec, str) else ""))
+                                f"{axis}{named}")
     if f.finite and a.dtype.kind == "f" and not np.all(np.isfinite(a)):
         raise DataFileError(f"{src}: field {f.name!r} holds NaN or infinite values")
     return a

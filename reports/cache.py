@@ -49,15 +49,18 @@ class StageCache:
     def path(self, name: str, suffix: str = ".json") -> Path:
         return self.folder / f"{name}{suffix}"
 
-    def _stored(self, name: str, key: str) -> dict | None:
+    def _stored(self, name: str, key: str, needs=()) -> dict | None:
         path = self.path(name)
         if not path.is_file():
             return None
         try:
             stored = json.loads(path.read_text(encoding="utf-8"))
             problem = None if isinstance(stored, dict) and isinstance(stored.get("key"), str) \
-                and isinstance(stored.get("seconds"), (int, float)) and isinstance(stored.get("result"), dict) \
+                and isinstance(stored.get("seconds"), (int, float)) and "result" in stored \
                 else "not a stage record (key, seconds, result)"
+            if problem is None and stored["key"] == key:
+                lacks = [k for k in needs if not isinstance(stored["result"], dict) or k not in stored["result"]]
+                problem = f"its result lacks {lacks}" if lacks else None
         except (OSError, ValueError) as exc:  # cut short, not JSON, not UTF-8, unreadable
             problem = f"{type(exc).__name__}: {exc}"
         if problem is not None:
@@ -97,9 +100,9 @@ class StageCache:
             return [self._from_record(v) for v in value]
         return value
 
-    def has(self, name: str, key: str) -> bool:
-        """Whether stage ``name`` is cached for ``key``."""
-        return self._stored(name, key) is not None
+    def has(self, name: str, key: str, needs=()) -> bool:
+        """Whether stage ``name`` is cached for ``key`` (with the keys ``needs``)."""
+        return self._stored(name, key, needs) is not None
 
     def store(self, name: str, key: str, result, seconds: float):
         """Record a stage computed elsewhere (e.g. by a worker) with its wall time."""
@@ -110,12 +113,13 @@ class StageCache:
         self._notify("stage_finished", name, seconds, False)
         return result
 
-    def run(self, name: str, key: str, compute):
+    def run(self, name: str, key: str, compute, needs=()):
         """Return the cached result of stage ``name`` for ``key``, or compute and store it.
 
         ``compute()`` returns a JSON-serialisable dict; its wall time is recorded.
+        ``needs``: the keys a stored result must hold to be used (else it is computed again).
         """
-        stored = self._stored(name, key)
+        stored = self._stored(name, key, needs)
         if stored is not None and name in self.stored:  # computed by a worker in this run
             return stored["result"]
         if stored is not None:

@@ -391,3 +391,13 @@ def test_calibrate_population_reuses_only_under_the_same_options(tmp_path, capsy
     assert main([*cal, "--seed", "5"]) == 0
     text = capsys.readouterr().out
     assert "drone 0: reused" in text and "same measurements, engines, seed, sampler" in text
+
+
+def test_a_stage_record_of_another_shape_is_computed_again(tmp_path):
+    from mdaug.reports.cache import StageCache
+
+    said = []
+    StageCache(tmp_path, log=lambda *_: None).store("calibrate_HELI", "k", {"cls": "HELI"}, 1.0)
+    got = StageCache(tmp_path, log=said.append).run("calibrate_HELI", "k", lambda: {"posterior": "p"},
+                                                    needs=("posterior",))
+    assert got == {"posterior": "p"} and any("lacks ['posterior']" in s for s in said), said
