@@ -111,7 +111,7 @@ def main(argv=None) -> int:
 
     quiet_before = os.environ.get(QUIET_ENV)
     set_quiet(args.quiet or (quiet_before or "").strip().lower() in ("1", "true", "yes", "on"))
-    from ..radar.workers import Terminated, terminate_as_interrupt
+    from ..radar.workers import terminate_as_interrupt, was_terminated
 
     prog = f"mdaug {args.verb}"
     try:
@@ -122,10 +122,10 @@ def main(argv=None) -> int:
         print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
     except (ValueError, DataFileError, OSError, MemoryError) as exc:  # not KeyError: that is a bug, with its traceback
         print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
-    except Terminated:
-        print(f"{prog}: terminated; {args.interrupted(args)}", file=sys.stderr)
-        return EXIT_TERMINATED
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (Terminated, perhaps wrapped by a sampler)
+        if was_terminated(exc):
+            print(f"{prog}: terminated; {args.interrupted(args)}", file=sys.stderr)
+            return EXIT_TERMINATED
         print(f"{prog}: interrupted; {args.interrupted(args)}", file=sys.stderr)
         return EXIT_INTERRUPTED
     finally:

@@ -27,6 +27,18 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM, raised in the main thread like Ctrl-C's KeyboardInterrupt."""
 
 
+def was_terminated(exc: BaseException | None) -> bool:
+    """Whether ``exc`` is, or was raised while handling or from, a :class:`Terminated`
+    (a sampler turns the interrupt into its own KeyboardInterrupt)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, Terminated):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
 def worker_init(parent: int | None = None) -> None:
     """``parent``: the parent's pid (a worker whose parent is already gone exits)."""
     quiet_worker()

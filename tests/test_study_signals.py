@@ -76,3 +76,41 @@ def test_ctrl_c_on_the_terminal_gives_one_line_and_no_worker_traceback(tmp_path)
     argv = _study(tmp_path)  # Ctrl-C: SIGINT to the whole process group, workers included
     status, _, err, took, kids = _signalled(argv, tmp_path, lambda p: os.killpg(p.pid, signal.SIGINT))
     _check(status, err, took, kids, tmp_path / "out", 130, "interrupted")
+
+
+def test_sigterm_wrapped_by_a_sampler_still_reads_as_terminated(monkeypatch, capsys):
+    """A sampler turns the interrupt into its own KeyboardInterrupt (CalibrationInterrupted,
+    raised from the Terminated): the command still ends with 'terminated' and 143; a
+    plain Ctrl-C with 'interrupted' and 130."""
+    import mdaug.cli as cli
+    from mdaug.inference.sampler_run import CalibrationInterrupted
+    from mdaug.radar.workers import Terminated
+
+    def wrapped(args):
+        try:
+            raise Terminated()
+        except KeyboardInterrupt as exc:
+            raise CalibrationInterrupted("stopped after stage 3") from exc
+
+    def ctrl_c(args):
+        raise CalibrationInterrupted("stopped after stage 3")
+
+    argv = ["train", "x.npz", "--model", "nb", "--out", "m.zip"]
+    parser = cli.build_parser(full={"train"})
+    for func, status, word in ((wrapped, 143, "terminated"), (ctrl_c, 130, "interrupted")):
+        monkeypatch.setattr(cli, "build_parser", lambda full=None, f=func: _Fixed(parser, f))
+        assert cli.main(argv) == status
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(f"mdaug train: {word}; "), err
+
+
+class _Fixed:
+    """A parser whose verb function is ``func``."""
+
+    def __init__(self, parser, func):
+        self.parser, self.func = parser, func
+
+    def parse_args(self, argv):
+        args = self.parser.parse_args(argv)
+        args.func = self.func
+        return args
