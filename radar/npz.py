@@ -11,6 +11,7 @@ the file and the field; truncated archives, zip errors and pickled objects inclu
 from __future__ import annotations
 
 import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -68,16 +69,22 @@ def read_arrays(path, what: str = "data file") -> dict:
                         raise DataFileError(f"{path}: field {key!r} holds Python objects; refusing to "
                                             "unpickle it") from None
                     raise DataFileError(f"{path}: field {key!r} is not a readable array ({exc})") from None
-                except (zipfile.BadZipFile, EOFError, KeyError, OSError) as exc:
-                    raise DataFileError(f"{path}: field {key!r} is cut short or corrupt ({type(exc).__name__}: "
-                                        f"{exc})") from None
+                except (zipfile.BadZipFile, zlib.error, EOFError, KeyError, OSError) as exc:
+                    raise DataFileError(f"{path}: field {key!r} is cut short or corrupt ({_why(exc)})") from None
             return out
     except DataFileError:
         raise
     except OSError as exc:
         raise DataFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
     except Exception as exc:  # BadZipFile, EOFError, ValueError of a truncated or corrupt archive
-        raise DataFileError(f"{path}: not a readable NPZ file ({type(exc).__name__}: {exc})") from None
+        raise DataFileError(f"{path}: not a readable NPZ file ({_why(exc)})") from None
+
+
+def _why(exc: BaseException, limit: int = 100) -> str:
+    """``Type: message`` of an archive error, cut to ``limit`` characters (zip errors
+    can quote whole headers)."""
+    text = f"{type(exc).__name__}: {exc}"
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 @dataclass(frozen=True)
