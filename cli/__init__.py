@@ -16,7 +16,7 @@ Modules, one per group of verbs (each defines its verbs once, in ``VERBS``):
 ``--threads`` and ``--quiet`` are accepted before and after the verb. Every bad input
 ends in one line ``mdaug VERB: error: ...`` naming the file and field, or the option,
 and exit status 2, before any output is written; an interrupt ends in one line and
-exit status 130. Only the verb being run builds its full parser, and heavy libraries
+exit status 130 (SIGTERM: 143). Only the verb being run builds its full parser, and heavy libraries
 load inside the verb, so ``mdaug --help`` is fast.
 """
 from __future__ import annotations
@@ -32,6 +32,7 @@ ORDER = ("simulate", "process", "calibrate", "train-estimator", "sbc", "augment"
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
+EXIT_TERMINATED = 143  # 128 + SIGTERM
 
 
 def verbs() -> dict:
@@ -111,15 +112,21 @@ def main(argv=None) -> int:
 
     quiet_before = os.environ.get(QUIET_ENV)
     set_quiet(args.quiet or (quiet_before or "").strip().lower() in ("1", "true", "yes", "on"))
+    from ..radar.workers import terminate_as_interrupt, was_terminated
+
     prog = f"mdaug {args.verb}"
     try:
-        apply_threads(args.threads)
-        return int(args.func(args) or 0)
+        with terminate_as_interrupt():  # SIGTERM ends the command like Ctrl-C: its workers stopped, one line
+            apply_threads(args.threads)
+            return int(args.func(args) or 0)
     except UsageError as exc:
         print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
     except (ValueError, DataFileError, OSError, MemoryError) as exc:  # not KeyError: that is a bug, with its traceback
         print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (Terminated, perhaps wrapped by a sampler)
+        if was_terminated(exc):
+            print(f"{prog}: terminated; {args.interrupted(args)}", file=sys.stderr)
+            return EXIT_TERMINATED
         print(f"{prog}: interrupted; {args.interrupted(args)}", file=sys.stderr)
         return EXIT_INTERRUPTED
     finally:

@@ -194,9 +194,26 @@ def drone_path(out: Path, drone: str) -> Path:
     return Path(f"{out}.drone-{drone}.nc")
 
 
+REUSE_FIELD = "population_reuse"
+"""Where a drone's posterior of ``--population`` records the options it was made with."""
+
+
+def reuse_key(engines, seed: int, settings, acquisition) -> dict:
+    """Every option that changes a drone's posterior (not threads nor progress bars):
+    a rerun reuses the posterior only when all of them, and the measurements, agree."""
+    import json
+
+    options = {k: v for k, v in settings.to_dict().items() if k not in ("threads", "progress")}
+    return json.loads(json.dumps({"engines": engines, "seed": int(seed), "sampler": options.pop("sampler"),
+                                  "settings": options, "acquisition": acquisition.to_dict()}))
+
+
 def run_population(args, profiles, drones, settings, acquisition) -> int:
     """Each drone calibrated on its own (kept beside OUT, reused by a rerun on the same
-    data), then the class's population (:func:`mdaug.inference.calibrate_population`)."""
+    data with the same options: :func:`reuse_key`), then the class's population
+    (:func:`mdaug.inference.calibrate_population`)."""
+    import json
+
     import numpy as np
 
     from ..inference.calibrate import calibrate
@@ -216,18 +233,28 @@ def run_population(args, profiles, drones, settings, acquisition) -> int:
     results = []
     for k, drone in enumerate(ids):
         path, rows = drone_path(args.out, drone), profiles[drones == drone]
+        seed = child_seed(args.seed, "drone", drone)
+        key = reuse_key(args.engines, seed, settings, acquisition)
         res = None
         if path.is_file():
             old = CalibrationResult.load(path, class_name=cls)
             data, _ = prepare_measured(rows, RadarConfig(), settings.normalisation)
-            if np.array_equal(np.asarray(old.idata.observed_data["y"]), data):
+            changed = [] if np.array_equal(np.asarray(old.idata.observed_data["y"]), data) else ["measurements"]
+            stored = old.meta.get(REUSE_FIELD) or {}
+            changed += ([name for name in key if stored.get(name) != key[name]] if stored
+                        else ["options (none recorded)"])
+            if not changed:
                 res = old
-                result(f"drone {drone}: reused {path}")
+                result(f"drone {drone}: reused {path} (same measurements, engines, seed, sampler, calibration "
+                       "settings and acquisition)")
+            else:
+                info(f"drone {drone}: {path} was calibrated with other {', '.join(changed)}; calibrating again")
         if res is None:
             info(f"drone {drone} ({k + 1} of {len(ids)}): calibrating from {len(rows)} profile(s)")
             res = calibrate(rows, cls, engines=args.engines, settings=settings, acquisition=acquisition,
-                            random_state=child_seed(args.seed, "drone", drone),
-                            backend_path=Path(f"{path}.chain.h5")).record_specimens([drone])
+                            random_state=seed, backend_path=Path(f"{path}.chain.h5")).record_specimens([drone])
+            res.meta[REUSE_FIELD] = key  # what a rerun must match to reuse this posterior
+            res.idata.posterior.attrs["mdaug"] = json.dumps(res.meta)
             res.save(path)
             Path(f"{path}.chain.h5").unlink(missing_ok=True)
             Path(f"{path}.chain.h5.fit.json").unlink(missing_ok=True)

@@ -12,8 +12,6 @@ from .common import add_verb, format_table, info, positive_int, result, seed_int
 
 
 WORKER_BYTES = 300 * 2 ** 20  # a worker process with numpy, scikit-learn and torch loaded, at least
-STUDY_FILES = ("report.html", "results.json", "stages/", "data/", "posteriors/", "models/", "figures/")
-"""What ``mdaug run`` writes in its --out folder (subfolders end in /)."""
 
 
 class StageProgress:
@@ -108,6 +106,7 @@ def invocation(args) -> str:
 
 def run_study(args) -> int:
     from ..reports.config import StudyConfig, load_config
+    from ..reports.identity import STUDY_FILES, check_study_folder, clear_study
 
     from .guard import Output, check_paths
 
@@ -134,10 +133,16 @@ def run_study(args) -> int:
         cfg.simulation = dataclasses.replace(cfg.simulation, ramps=args.ramps)
         check_study_ramps(cfg)
     cfg.validate()  # everything checked before the output folder exists
+    from .study_sizes import check_study_sizes
+
+    check_study_sizes(cfg)  # the config's sizes and its files', under the options' one bound
     data_files = [(f"[data] {group}.{name}", path) for group in ("calibration", "select", "test")
                   for name, path in (getattr(cfg.data, group) or {}).items()]
     check_paths(inputs=[("--config", args.config), *data_files],
                 outputs=[Output("--out", out, "folder", inside=STUDY_FILES)])
+    if check_study_folder(out, cfg, overwrite=args.overwrite):  # another study: refused, or replaced when asked
+        clear_study(out)
+        info(f"{out}: the other study's files were removed (--overwrite)")
     from ..reports.study import Study, stage_names
 
     progress = StageProgress(stage_names(cfg))
@@ -171,6 +176,9 @@ def add_run(sub, parents, help):
     p.add_argument("--out", type=Path, default=Path("mdaug-study"),
                    help="output folder, created if needed (default: %(default)s)")
     p.add_argument("--quick", action="store_true", help="small sizes: a run of one to two minutes")
+    p.add_argument("--overwrite", action="store_true",
+                   help="when --out holds another study (other data, seed, classes or scene), remove its files "
+                        "and run this one (default: refuse; the same study always resumes)")
     p.add_argument("--ramps", type=positive_int, default=None, metavar="K",
                    help="ramps per frame of the simulated campaign (default: the config's, 32; 4 gives the "
                         "4-ramp campaign)")

@@ -99,17 +99,25 @@ def run_sweep(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     executor = None
     if args.workers > 1:
+        import os
         from concurrent.futures import ProcessPoolExecutor
 
-        from ..radar.progress import quiet_worker
+        from ..radar.workers import worker_init
 
-        executor = ProcessPoolExecutor(args.workers, initializer=quiet_worker)
+        executor = ProcessPoolExecutor(args.workers, initializer=worker_init, initargs=(os.getpid(),))
     info(f"sweep: {len(args.sigma_p)} sigma_P x {len(args.models)} models, {2 * args.n_per_class} training "
          f"profiles each, tests {', '.join(f'{k} ({len(v[1])})' for k, v in tests.items())}")
     try:
         res = sigma_p_sweep(make_train, tests, sigma_ps=args.sigma_p, models=args.models, random_state=args.seed,
                             executor=executor, model_params=params, n_boot=args.n_boot,
                             cache_dir=None if args.no_resume else out / "jobs")
+    except BaseException:  # interrupted (Ctrl-C, SIGTERM) or failed: the workers stop now, before the one line
+        if executor is not None:
+            from ..radar.workers import stop_pool
+
+            stop_pool(executor)
+            executor = None
+        raise
     finally:
         if executor is not None:
             executor.shutdown(cancel_futures=True)

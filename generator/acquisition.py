@@ -141,7 +141,7 @@ class Acquisition:
             raise ValueError(f"{source}: unknown acquisition field(s) {unknown}; known: {sorted(known)}")
         try:
             return cls(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()})
-        except ValueError as exc:
+        except (ValueError, TypeError, OverflowError) as exc:  # e.g. ramps = Infinity, null, "4"
             raise ValueError(f"{source}: {exc}") from None
 
     def describe(self) -> str:
@@ -178,7 +178,7 @@ def acquisition_from_file(extra: dict, source: str) -> Acquisition | None:
         acq = Acquisition.from_dict(table, f"{source}: field 'acquisition'")
     if "ramps_per_frame" in extra:
         raw = np.asarray(extra["ramps_per_frame"])
-        if raw.size != 1 or not np.issubdtype(raw.dtype, np.number) or float(raw) != int(raw) or int(raw) < 1:
+        if raw.size != 1 or raw.dtype.kind not in "iuf" or not float(raw.ravel()[0]).is_integer() or raw < 1:
             raise ValueError(f"{source}: field 'ramps_per_frame' must be one integer >= 1 (ramps averaged per "
                              f"profile), got {raw.tolist()!r}")
         k = int(raw)

@@ -18,6 +18,7 @@ import numpy as np
 from ..generator.params import IDX, N_PARAMS
 from ..generator.specimens import SpecimenSpread
 from ..radar.io import DataFileError, atomic_savez
+from ..radar.npz import Field, check_field, read_arrays
 from ..radar.seeds import rng as as_rng
 from .population import SPREADS, Hyperprior, PopulationModel, sample_spreads, summarise_drone
 
@@ -223,38 +224,92 @@ class PopulationResult:
 
     @classmethod
     def load(cls, path, *, class_name: str | None = None) -> "PopulationResult":
+        """Read a population file through the checked NPZ reader (:func:`mdaug.radar.npz.read_checked`):
+        every field present with its dtype, rank and shape, finite; ``meta`` a JSON
+        table with its keys; errors are one :class:`DataFileError` naming file and field."""
         path = Path(path)
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                files = {k: z[k] for k in z.files}
-        except (OSError, ValueError) as e:
-            raise DataFileError(f"{path}: not a readable population file ({e})") from None
-        missing = [k for k in ARRAYS + ("meta",) if k not in files]
+        arrays = read_arrays(path, "population file")
+        missing = [k for k in ARRAYS + ("meta",) if k not in arrays]
         if missing:
             raise DataFileError(f"{path}: not a population file, missing field(s) {missing}")
-        try:
-            meta = json.loads(str(files.pop("meta")))
-        except ValueError:
-            raise DataFileError(f"{path}: field 'meta' is not JSON") from None
-        if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-            got = meta.get("format") if isinstance(meta, dict) else meta
-            raise DataFileError(f"{path}: field 'meta' format {got!r}, expected {FORMAT!r}")
-        gone = [k for k in META_FIELDS if k not in meta]
-        if gone:
-            raise DataFileError(f"{path}: field 'meta' lacks {gone}")
-        res = cls({k: files[k] for k in ARRAYS}, meta)
-        p, e13 = res.model.p, res.n_engines * N_PARAMS
-        q = int(res.arrays["measured"].sum())
-        want = {"spreads": (None, len(SPREADS)), "mu": (len(res.arrays["spreads"]), q), "measured": (p,),
-                "pool": (None, e13), "pool_drone": (len(res.arrays["pool"]),), "drone_means": (res.n_drones, p),
-                "reference": (e13,)}
-        for k, shape in want.items():
-            got = res.arrays[k].shape
-            if len(got) != len(shape) or any(s is not None and s != g for s, g in zip(shape, got)):
-                raise DataFileError(f"{path}: field {k!r} has shape {got}, expected {shape} "
-                                    f"(None: any) for {res.n_engines} engine(s)")
-            if k != "measured" and not np.all(np.isfinite(res.arrays[k])):
-                raise DataFileError(f"{path}: field {k!r} holds NaN or infinite values")
+        meta = _load_meta(path, check_field(arrays, Field("meta", "U", 0, text="a JSON table"), path))
+        n_eng = int(meta["n_engines"])
+        model = PopulationModel(n_eng)
+        e13 = n_eng * N_PARAMS
+        sizes = {"p": model.p, "e13": e13, "drones": len(meta["specimens"])}
+        measured = check_field(arrays, Field("measured", "biu", 1, ("p",), text="booleans (p,)"), path, sizes)
+        if not np.isin(measured, (0, 1)).all():
+            raise DataFileError(f"{path}: field 'measured' holds values other than true/false")
+        sizes["q"] = int(measured.astype(bool).sum())
+        for f in FIELDS:
+            arrays[f.name] = check_field(arrays, f, path, sizes)
+        for k in ("spreads", "pool"):
+            if len(arrays[k]) < 1:
+                raise DataFileError(f"{path}: field {k!r} holds no draws")
+        if np.any(arrays["spreads"] < 0):
+            raise DataFileError(f"{path}: field 'spreads' holds negative spreads")
+        drone = arrays["pool_drone"]
+        if drone.min() < 0 or drone.max() >= sizes["drones"]:
+            raise DataFileError(f"{path}: field 'pool_drone' holds drone indices outside 0..{sizes['drones'] - 1}")
+        res = cls({k: arrays[k] for k in ARRAYS}, meta)
         if class_name is not None and res.class_name != class_name.upper():
             raise DataFileError(f"{path}: population of class {res.class_name!r}, expected {class_name.upper()!r}")
         return res
+
+
+MAX_ENGINES = 16
+FIELDS = (Field("spreads", "f", 2, ("draws", len(SPREADS)), text=f"spread draws (n, {len(SPREADS)})"),
+          Field("mu", "f", 2, ("draws", "q"), text="mean-drone draws (n, measured coordinates)"),
+          Field("pool", "f", 2, ("pool", "e13"), text="drone posterior draws (m, 13E)"),
+          Field("pool_drone", "iu", 1, ("pool",), text="drone index per pool draw (m,)"),
+          Field("drone_means", "f", 2, ("drones", "p"), text="each drone's mean (drones, p)"),
+          Field("reference", "f", 1, ("e13",), text="the class vector (13E,)"))
+"""The array fields of a population file after ``meta`` and ``measured`` (named axes: see
+:class:`mdaug.radar.npz.Field`)."""
+
+
+def _load_meta(path, raw) -> dict:
+    """The ``meta`` table of a population file, every key the population reads checked."""
+    try:
+        meta = json.loads(str(raw))
+    except ValueError:
+        raise DataFileError(f"{path}: field 'meta' is not JSON") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        got = meta.get("format") if isinstance(meta, dict) else meta
+        raise DataFileError(f"{path}: field 'meta' format {got!r}, expected {FORMAT!r}")
+    gone = [k for k in META_FIELDS if k not in meta]
+    if gone:
+        raise DataFileError(f"{path}: field 'meta' lacks {gone}")
+
+    def bad(key, expected):
+        return DataFileError(f"{path}: field 'meta' key {key!r} = {str(meta.get(key))[:60]!r}: expected {expected}")
+
+    n = meta["n_engines"]
+    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_ENGINES:
+        raise bad("n_engines", f"an integer in 1..{MAX_ENGINES}")
+    if not isinstance(meta["class_name"], str) or not meta["class_name"]:
+        raise bad("class_name", "a class name")
+    spec = meta["specimens"]
+    if not isinstance(spec, list) or not spec or not all(isinstance(s, str) for s in spec):
+        raise bad("specimens", "a non-empty list of drone ids")
+    conv = meta["drones_converged"]
+    if not isinstance(conv, list) or len(conv) != len(spec) or not all(isinstance(c, bool) for c in conv):
+        raise bad("drones_converged", f"a list of {len(spec)} true/false")
+    hyper = meta["hyperprior"]
+    if not isinstance(hyper, dict) or not all(isinstance(hyper.get(k), (int, float)) and not isinstance(
+            hyper.get(k), bool) and np.isfinite(hyper[k]) and hyper[k] > 0 for k in SPREADS):
+        raise bad("hyperprior", f"a table of positive scales for {list(SPREADS)}")
+    d = meta["diagnostics"]
+    if not (isinstance(d, dict) and isinstance(d.get("converged"), bool) and isinstance(d.get("steps"), int)
+            and isinstance(d.get("tau"), list) and d["tau"] and all(isinstance(t, (int, float)) for t in d["tau"])):
+        raise bad("diagnostics", "a table with converged (true/false), steps (an integer) and tau (numbers)")
+    from ..generator.acquisition import Acquisition
+    from .priors import Priors
+
+    for key, read in (("acquisition", lambda v: Acquisition.from_dict(v, "acquisition")), ("priors", Priors.from_dict)):
+        try:
+            read(meta[key])
+        except (ValueError, TypeError, KeyError, AttributeError, OverflowError) as exc:
+            raise DataFileError(f"{path}: field 'meta' key {key!r} is not readable ({type(exc).__name__}: "
+                                f"{exc})") from None
+    return meta

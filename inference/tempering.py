@@ -205,7 +205,7 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
             min_sweeps: int = 2, max_sweeps: int = 40, max_stages: int = 500, min_acceptance: float = 0.02,
             phase_cols=(), bounds=None, p_redraw: float = 0.0, modes=None, p_jump: float = 0.0,
             relabel=None, p_relabel: float = 0.0, backend_path=None, fp: str = "",
-            progress: bool | None = False) -> SMCResult:
+            progress: bool | None = False, time_budget: float | None = None) -> SMCResult:
     """Adaptive tempered SMC from the prior to the posterior (see the module docstring).
 
     target: theta (n, dim) -> (log prior (n,), log likelihood (n,)), vectorised;
@@ -224,9 +224,17 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
     p_relabel: an exact-symmetry move (see :func:`de_sweep`).
     backend_path: npz checkpoint (resumable, see above). progress: a bar of beta
     (0 -> 1) on a terminal. A Ctrl-C stops after the current stage (its checkpoint
-    saved) with :class:`.samplers.CalibrationInterrupted`.
+    saved) with :class:`.samplers.CalibrationInterrupted`. time_budget: seconds; checked
+    between the rejuvenation sweeps, the run ends within a sweep of it, flagged not converged.
     """
     t0 = time.perf_counter()
+    deadline, timed_out = None if time_budget is None else t0 + time_budget, []
+
+    def out_of_time() -> bool:  # True (and remembered) when the budget cuts the run short
+        if deadline is not None and time.perf_counter() > deadline:
+            timed_out.append(True)
+        return bool(timed_out)
+
     path = None if backend_path is None else Path(backend_path)
     state = _check_checkpoint(path, fp) if path is not None else None
     rng = seeded_rng(seed)
@@ -252,7 +260,7 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
                        progress=progress)
     try:
         with stop_on_sigint() as flag:
-            while betas[-1] < 1.0 and len(betas) - 1 < max_stages:
+            while betas[-1] < 1.0 and len(betas) - 1 < max_stages and not out_of_time():
                 beta = betas[-1]
                 b = next_beta(ll, beta, ess_target * n)
                 lw = (b - beta) * ll
@@ -268,7 +276,7 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
                     n_evals += modes.update(theta, b, rng)
                     mixture = modes.mixture(b, rng)
                 acc_sum, sweeps, need = 0.0, 0, min_sweeps
-                while sweeps < need:
+                while sweeps < need and not (sweeps and out_of_time()):
                     theta, ll, lprior, a = de_sweep(theta, ll, lprior, b, target, rng, phase_cols, bounds, p_redraw,
                                                     mixture, p_jump, relabel, p_relabel)
                     n_evals += n
@@ -293,7 +301,10 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
     finally:
         bar.close()
     stages = len(betas) - 1
-    if betas[-1] < 1.0:
+    if timed_out:
+        converged, reason = False, (f"NOT CONVERGED: the time budget of {time_budget:g} s ended the run at beta "
+                                    f"{betas[-1]:.3g} after {stages} stage(s); rerun to continue")
+    elif betas[-1] < 1.0:
         converged, reason = False, (f"NOT CONVERGED: SMC stage budget of {max_stages} ended at beta "
                                     f"{betas[-1]:.3g} < 1 (particles are not posterior draws)")
     elif acc_h and acc_h[-1] < min_acceptance:
@@ -343,7 +354,7 @@ class SMCSampler:
                       max_stages=settings.smc_max_stages, phase_cols=layout.phase_cols, bounds=bounds,
                       p_redraw=settings.smc_redraw, modes=modes, p_jump=settings.smc_jump,
                       relabel=layout.random_relabel if layout.labelled else None, p_relabel=settings.relabel, backend_path=backend_path,
-                      fp=fingerprint, progress=settings.progress)
+                      fp=fingerprint, progress=settings.progress, time_budget=settings.time_budget)
         ess = float(smc.ess[-1]) if smc.ess.size else float(n)
         acc = float(smc.acceptance[-1]) if smc.acceptance.size else 1.0
         # the N particles as one stored step; tau = N / ESS (ESS: the weight ESS of the last

@@ -20,11 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .names import check_distinct, check_name
+from .npz import DataFileError, check_readable, read_arrays  # noqa: F401 (read_arrays: part of this module's API)
 from .profiles import as_profile_array
-
-
-class DataFileError(ValueError):
-    """A data file is missing, unreadable or holds the wrong thing."""
 
 
 @dataclass
@@ -65,9 +63,14 @@ class ProfileSet:
         return self
 
     def specimens(self, label: str) -> np.ndarray:
-        """Drone id (strings) of each profile of class ``label`` (n,): the ``specimen`` field, else "0"."""
-        ids = self.extra.get("specimen", np.zeros(len(self.labels), int))
-        return np.asarray(ids)[self.labels == label].astype(str)
+        """Drone id (strings) of each profile of class ``label`` (n,): the ``specimen`` field, else "0".
+        Drone ids become file names (a drone's posterior): each must pass the one name rule."""
+        ids = np.asarray(self.extra.get("specimen", np.zeros(len(self.labels), int)))[self.labels == label].astype(str)
+        unique = list(dict.fromkeys(ids.tolist()))
+        for drone in unique:
+            check_name(drone, f"{self.source}: field 'specimen' drone id", error=DataFileError)
+        check_distinct(unique, f"{self.source}: field 'specimen'", error=DataFileError)
+        return ids
 
     def select(self, label: str) -> np.ndarray:
         """Profiles (n, L) of one class; error naming the file when absent."""
@@ -296,62 +299,11 @@ def _read_csv(path: Path) -> tuple[np.ndarray, np.ndarray, dict]:
     return np.array(values), np.array(labels), {}
 
 
-def _read_mat(path: Path) -> dict:
-    from scipy.io import loadmat
-
-    try:
-        return {k: v for k, v in loadmat(path).items() if not k.startswith("__")}
-    except Exception as exc:  # scipy raises several types for corrupt files
-        raise DataFileError(f"{path}: not a readable MATLAB file ({exc})") from None
-
-
-def read_arrays(path) -> dict:
-    """All arrays of an NPZ or .mat file, loaded without pickle."""
-    path = Path(path)
-    if path.is_dir():
-        raise DataFileError(f"{path}: is a folder, not a data file")
-    if not path.is_file():
-        raise DataFileError(f"{path}: file not found")
-    if path.stat().st_size == 0:
-        raise DataFileError(f"{path}: file is empty")
-    suffix = path.suffix.lower()
-    if suffix == ".mat":
-        return _read_mat(path)
-    with open(path, "rb") as fh:
-        magic = fh.read(6)
-    if magic.startswith(b"\x93NUMPY"):
-        raise DataFileError(f"{path}: expected an NPZ archive, found a single .npy array")
-    if not magic.startswith(b"PK"):
-        what = "a Python pickle; refusing to unpickle it" if magic[:1] == b"\x80" else "not a ZIP archive"
-        raise DataFileError(f"{path}: not a readable NPZ file ({what})")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            out = {}
-            for key in data.files:
-                try:
-                    out[key] = data[key]
-                except ValueError as exc:
-                    if "allow_pickle" in str(exc):
-                        raise DataFileError(f"{path}: field {key!r} holds Python objects; refusing to "
-                                            "unpickle it") from None
-                    raise DataFileError(f"{path}: field {key!r} is not a readable array ({exc})") from None
-            return out
-    except DataFileError:
-        raise
-    except OSError as exc:
-        raise DataFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    except Exception as exc:
-        raise DataFileError(f"{path}: not a readable NPZ file ({type(exc).__name__}: {exc})") from None
-
-
 def load_profiles(path) -> ProfileSet:
     """Read measured or synthetic profiles from NPZ, CSV or .mat (SPEC section 7)."""
     path = Path(path)
     if path.suffix.lower() == ".csv":
-        if path.is_dir():
-            raise DataFileError(f"{path}: is a folder, not a data file")
-        if not path.is_file():
-            raise DataFileError(f"{path}: file not found")
+        check_readable(path)
         profiles, labels, extra = _read_csv(path)
     else:
         arrays = read_arrays(path)

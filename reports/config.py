@@ -29,6 +29,7 @@ from pathlib import Path
 
 from ..generator import load_reference
 from ..radar import NORMALISATIONS
+from ..radar.names import check_distinct, check_name
 from ..strategies import STRATEGIES as REGISTRY
 from .validation import ConfigTypeError, check_types, convert, field_types
 
@@ -147,6 +148,7 @@ class StudyConfig:
             raise ValueError(f"{src}: scheduler is empty: expected an address (host:port) or 'local'")
         if not self.classes or len(set(self.classes)) != len(self.classes):
             raise ValueError(f"{src}: classes = {list(self.classes)}: expected distinct class names")
+        self._check_names(src)
         for c in self.classes:
             try:
                 load_reference(c)
@@ -206,6 +208,21 @@ class StudyConfig:
         if check_files:
             self._check_files()
         return self
+
+    def _check_names(self, src: str) -> None:
+        """Names that become file names (classes, test sets) pass the one name rule
+        (:mod:`mdaug.radar.names`) and are not the study's own sets: a study writes
+        only inside its folder, and never one set over another."""
+        for i, c in enumerate(self.classes):
+            check_name(c, f"{src}: classes[{i}]")
+        check_distinct(self.classes, f"{src}: classes")
+        for group in ("calibration", "select"):
+            for name in getattr(self.data, group):
+                check_name(name, f"{src}: [data] {group} class name")
+        own = ("select", "calibration", *(f"calibration_{c}" for c in self.classes))
+        for name in self.data.test:
+            check_name(name, f"{src}: [data] test set name", reserved=own, prefixes=("calibration_",))
+        check_distinct(self.data.test, f"{src}: [data] test set names")
 
     def _check_files(self) -> None:
         """Every data file readable, 400-bin, no all-zero rows, the right classes."""

@@ -32,11 +32,28 @@ class ProcessExecutor:
         self._pool = None
 
     def map(self, fn, items):
-        if self._pool is None:
-            from ..radar.progress import quiet_worker
+        """Results in order; on an interrupt (Ctrl-C, SIGTERM) or any error the workers are
+        stopped and waited for before it propagates (:mod:`mdaug.radar.workers`)."""
+        import os
 
-            self._pool = ProcessPoolExecutor(max_workers=self.workers, initializer=quiet_worker)
-        return list(self._pool.map(fn, items))
+        from ..radar.workers import worker_init
+
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(max_workers=self.workers, initializer=worker_init,
+                                             initargs=(os.getpid(),))
+        try:
+            return list(self._pool.map(fn, items))
+        except BaseException:
+            self.stop()
+            raise
+
+    def stop(self) -> None:
+        """Cancel what is pending and terminate the workers now."""
+        from ..radar.workers import stop_pool
+
+        if self._pool is not None:
+            stop_pool(self._pool)
+            self._pool = None
 
     def close(self) -> None:
         if self._pool is not None:
@@ -59,10 +76,21 @@ class DaskExecutor:
 
     def map(self, fn, items):
         futures = self.client.map(fn, list(items), pure=False)
-        return self.client.gather(futures)
+        try:
+            return self.client.gather(futures)
+        except BaseException:  # interrupted: nothing more of these jobs runs
+            import contextlib
+
+            with contextlib.suppress(Exception):
+                self.client.cancel(futures)
+                self.close()
+            raise
 
     def close(self) -> None:
-        self.client.close()
+        client, self.client = self.client, None
+        if client is None:
+            return
+        client.close()
         if self._cluster is not None:
             self._cluster.close()
 

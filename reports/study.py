@@ -45,8 +45,13 @@ from . import jobs, statistics, verdicts
 from .cache import StageCache, settings_key
 from .config import StudyConfig
 from .executor import make_executor
+from .identity import check_study_folder, claim, study_key
 from .study_training import TrainingStages, chosen_spec
 
+
+
+CALIBRATION_NEEDS = ("posterior", "population", "converged", "diagnostics", "drones")
+"""What a stored calibration stage must hold to be used (else it is computed again)."""
 
 
 def _stage_seed(cfg: StudyConfig, *keys) -> int:
@@ -59,14 +64,16 @@ class Study(TrainingStages):
     def __init__(self, cfg: StudyConfig, out: Path, log=print, invocation: str | None = None):
         self.cfg = cfg.validate(check_files=False)
         self.invocation = invocation
-        self.out = Path(out)
+        self.out = Path(out).absolute()  # its records do not depend on the working directory
+        check_study_folder(self.out, cfg)  # another study's folder: refused before anything is written
         self.out.mkdir(parents=True, exist_ok=True)
         for sub in ("data", "posteriors", "models", "figures"):
             (self.out / sub).mkdir(exist_ok=True)
         self.log = log
         self.cache = StageCache(self.out, log)
+        claim(self.out, cfg)
         c, p = cfg.to_dict(), cfg.to_dict()["protocol"]
-        self.key = settings_key(c["seed"], c["classes"], c["data"], c["simulation"], p["acquisition_ramps"])
+        self.key = study_key(cfg)
         self.calib_key = settings_key(self.key, c["quick"], {k: v for k, v in p.items() if k.startswith("calibration")})
         self.cand_key = settings_key(self.calib_key, [p[k] for k in ("sigma_p", "specimen_widths", "models",
                                                                      "sweep_n_per_class", "strategies",
@@ -89,7 +96,7 @@ class Study(TrainingStages):
                 index["sets"][name] = {"path": str(path), "n": int(len(y)),
                                        "per_class": {c: int(np.sum(np.asarray(y) == c)) for c in self.cfg.classes}}
             return index
-        return self.cache.run("data", self.key, compute)
+        return self.cache.run("data", self.key, compute, needs=("sets", "acquisition"))
 
     def _file_sets(self):
         from ..generator.acquisition import Acquisition, acquisition_from_file
@@ -212,11 +219,13 @@ class Study(TrainingStages):
 
     def calibrate(self, cls: str, acquisition) -> dict:
         return self.cache.run(f"calibrate_{cls}", settings_key(self.calib_key, cls),
-                              lambda: _jsonable(jobs.calibrate_class(self._calibration_job(cls, acquisition))))
+                              lambda: _jsonable(jobs.calibrate_class(self._calibration_job(cls, acquisition))),
+                              needs=CALIBRATION_NEEDS)
 
     def calibrations(self, acquisition, executor) -> dict:
         """Every class calibrated (cached); with workers, the uncached classes at once."""
-        todo = [c for c in self.cfg.classes if not self.cache.has(f"calibrate_{c}", settings_key(self.calib_key, c))]
+        todo = [c for c in self.cfg.classes
+                if not self.cache.has(f"calibrate_{c}", settings_key(self.calib_key, c), CALIBRATION_NEEDS)]
         if len(todo) > 1 and self.cfg.workers > 1:
             work = [self._calibration_job(c, acquisition) for c in todo]
             for c, res in zip(todo, executor.map(jobs.calibrate_class, work)):
@@ -264,7 +273,8 @@ class Study(TrainingStages):
                     rows += [{"strategy": name, "parameter": param, "value": r.pop("sigma_p"), **r} for r in res]
                     bar.update(1)
             return {"rows": rows, "selection_set": sel_name}
-        return self.cache.run("candidates", settings_key(self.cand_key, "rows of the sweep job"), compute)
+        return self.cache.run("candidates", settings_key(self.cand_key, "rows of the sweep job"), compute,
+                              needs=("rows", "selection_set"))
 
     @staticmethod
     def choose(rows: list[dict], strategy: str, on: str) -> dict:

@@ -21,6 +21,7 @@ from . import jobs
 from .cache import settings_key
 
 CEILING_MODELS = ("svm", "xgb", "nb", "cnn")
+CNN_NEEDS = ("predictions", "runs", "seeds", "spec")  # what a stored CNN stage must hold to be used
 
 
 def chosen_spec(specs: list[TrainingSpec], choice: dict | None) -> TrainingSpec:
@@ -59,16 +60,17 @@ class TrainingStages:
         return out
 
     def _cnn_key(self, job: dict) -> str:
-        return settings_key(self.cnn_key, job["name"], job["spec"].to_dict(), job["run_seeds"])
+        # the spec's files by their place in the study folder: a moved folder, or another working directory, resumes
+        return settings_key(self.cnn_key, job["name"], self.cache.relative(job["spec"].to_dict()), job["run_seeds"])
 
     def cnns(self, cnn_jobs: dict, executor) -> dict:
         """Every strategy's stage result (cached; uncached strategies go to the executor together)."""
-        todo = [j for name, j in cnn_jobs.items() if not self.cache.has(f"cnn_{name}", self._cnn_key(j))]
+        todo = [j for name, j in cnn_jobs.items() if not self.cache.has(f"cnn_{name}", self._cnn_key(j), CNN_NEEDS)]
         if len(todo) > 1 and self.cfg.workers > 1:
             for job, res in zip(todo, executor.map(jobs.train_and_test, todo)):
                 self.cache.store(f"cnn_{job['name']}", self._cnn_key(job), res,
                                  res["data_seconds"] + res["train_seconds"])
-        return {name: self.cache.run(f"cnn_{name}", self._cnn_key(j), lambda j=j: jobs.train_and_test(j))
+        return {name: self.cache.run(f"cnn_{name}", self._cnn_key(j), lambda j=j: jobs.train_and_test(j), CNN_NEEDS)
                 for name, j in cnn_jobs.items()}
 
     # ---- stage 6: separability ceiling --------------------------------------------------------------

@@ -148,3 +148,21 @@ def test_calibrate_with_smc_is_complete_and_resumable(tmp_path):
     assert res.plot_corner(tmp_path / "c.png").exists() and res.plot_trace(tmp_path / "t.png").exists()
     # the noise level (1% of the peak) is recovered
     assert 0.007 < res.summary().loc["sigma@0", "mean"] < 0.013
+
+
+def test_the_time_budget_ends_the_run_within_a_sweep_flagged():
+    """A slow target (10 ms an evaluation, a sweep of 40): --time-budget 0.5 s ends the run
+    within a sweep of it, not converged, saying so; without a budget it runs on."""
+    import time
+
+    def slow(theta):
+        time.sleep(0.01)
+        return mixture_target(theta)
+
+    t0 = time.perf_counter()
+    r = run_smc(slow, box_prior, 40, 0, time_budget=0.5, max_sweeps=40)
+    took = time.perf_counter() - t0
+    assert took < 0.5 + 0.5, took  # within a sweep or two of the budget
+    assert not r.converged and "time budget of 0.5 s" in r.reason and r.betas[-1] < 1.0
+    fast = run_smc(mixture_target, box_prior, 200, 0, time_budget=60.0)
+    assert fast.converged and "time budget" not in fast.reason

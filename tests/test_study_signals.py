@@ -1,0 +1,116 @@
+"""SIGTERM and Ctrl-C reach the study's workers (issue 31): a study with two worker
+processes ends within seconds with one line (exit 143 / 130), its workers are gone,
+nothing is written after the parent's line, and a rerun resumes. Each case starts a
+real ``mdaug run`` in its own session and signals it once its workers are calibrating."""
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+psutil = pytest.importorskip("psutil")
+
+
+def _study(d):
+    from mdaug.radar import atomic_savez
+
+    x = np.abs(np.random.default_rng(0).normal(0.1, 0.05, (12, 400)))
+    x[:, 200] = 1.0
+    atomic_savez(d / "m.npz", profiles=x, labels=np.array(["HELI"] * 6 + ["QUAD"] * 6), ramps_per_frame=np.array(4))
+    (d / "s.toml").write_text('[data]\ncalibration = { HELI = "m.npz", QUAD = "m.npz" }\ntest = { new = "m.npz" }\n')
+    return [sys.executable, "-m", "mdaug", "run", "--config", str(d / "s.toml"), "--out", str(d / "out"),
+            "--workers", "2"]
+
+
+def _tree(folder):
+    return {str(p): p.stat().st_mtime_ns for p in folder.rglob("*")}
+
+
+def _signalled(argv, d, send):
+    """Start ``argv``, wait for its two workers (the calibrations), signal it with
+    ``send(process)``; returns (status, stdout, stderr, seconds to exit, workers)."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path), OMP_NUM_THREADS="1")
+    p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                         env=env)
+    try:
+        t0, kids = time.time(), []
+        while time.time() - t0 < 60 and len(kids) < 2:
+            kids = psutil.Process(p.pid).children(recursive=True)
+            time.sleep(0.1)
+        assert len(kids) >= 2, "the study's workers did not start"
+        time.sleep(1.0)  # the workers are calibrating
+        t1 = time.time()
+        send(p)
+        out, err = p.communicate(timeout=30)  # the workers hold the pipes too: this returns when all are gone
+        return p.returncode, out, err, time.time() - t1, kids
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+
+
+def _check(status, err, took, kids, folder, want_status, word):
+    lines = err.strip().splitlines()
+    assert status == want_status, err
+    assert len(lines) == 1 and lines[0].startswith(f"mdaug run: {word}; finished stages are kept"), err
+    assert "Traceback" not in err
+    assert took < 10, took
+    assert not [k.pid for k in kids if k.is_running() and k.status() != psutil.STATUS_ZOMBIE]
+    before = _tree(folder)
+    time.sleep(2.0)
+    assert _tree(folder) == before, "something was written after the parent's line"
+
+
+def test_sigterm_stops_the_workers_and_a_rerun_resumes(tmp_path):
+    argv = _study(tmp_path)
+    status, _, err, took, kids = _signalled(argv, tmp_path, lambda p: p.send_signal(signal.SIGTERM))
+    _check(status, err, took, kids, tmp_path / "out", 143, "terminated")
+    status, out, err, took, kids = _signalled(argv, tmp_path, lambda p: p.send_signal(signal.SIGTERM))
+    _check(status, err, took, kids, tmp_path / "out", 143, "terminated")
+    assert "[data] cached" in out
+
+
+def test_ctrl_c_on_the_terminal_gives_one_line_and_no_worker_traceback(tmp_path):
+    argv = _study(tmp_path)  # Ctrl-C: SIGINT to the whole process group, workers included
+    status, _, err, took, kids = _signalled(argv, tmp_path, lambda p: os.killpg(p.pid, signal.SIGINT))
+    _check(status, err, took, kids, tmp_path / "out", 130, "interrupted")
+
+
+def test_sigterm_wrapped_by_a_sampler_still_reads_as_terminated(monkeypatch, capsys):
+    """A sampler turns the interrupt into its own KeyboardInterrupt (CalibrationInterrupted,
+    raised from the Terminated): the command still ends with 'terminated' and 143; a
+    plain Ctrl-C with 'interrupted' and 130."""
+    import mdaug.cli as cli
+    from mdaug.inference.sampler_run import CalibrationInterrupted
+    from mdaug.radar.workers import Terminated
+
+    def wrapped(args):
+        try:
+            raise Terminated()
+        except KeyboardInterrupt as exc:
+            raise CalibrationInterrupted("stopped after stage 3") from exc
+
+    def ctrl_c(args):
+        raise CalibrationInterrupted("stopped after stage 3")
+
+    argv = ["train", "x.npz", "--model", "nb", "--out", "m.zip"]
+    parser = cli.build_parser(full={"train"})
+    for func, status, word in ((wrapped, 143, "terminated"), (ctrl_c, 130, "interrupted")):
+        monkeypatch.setattr(cli, "build_parser", lambda full=None, f=func: _Fixed(parser, f))
+        assert cli.main(argv) == status
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(f"mdaug train: {word}; "), err
+
+
+class _Fixed:
+    """A parser whose verb function is ``func``."""
+
+    def __init__(self, parser, func):
+        self.parser, self.func = parser, func
+
+    def parse_args(self, argv):
+        args = self.parser.parse_args(argv)
+        args.func = self.func
+        return args
