@@ -38,13 +38,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..radar import atomic_savez, atomic_write, load_profiles
+from ..radar import atomic_savez, load_profiles
 from ..radar.seeds import child_seed
 from ..strategies import STRATEGIES, TrainingSpec, training_set
 from . import jobs, statistics, verdicts
 from .cache import StageCache, settings_key
 from .config import StudyConfig
 from .executor import make_executor
+from .results_file import write_results
 from .study_training import TrainingStages, chosen_spec
 
 
@@ -334,8 +335,7 @@ class Study(TrainingStages):
         if ceiling is not None:
             results["ceiling"]["chosen"] = verdicts.ceiling_choice(results["ceiling"]["models"], sel_name)
         results["verdicts"] = verdicts.judge(results)
-        text = json.dumps(_jsonable(results), indent=1)
-        atomic_write(self.out / "results.json", lambda fh: fh.write(text.encode()))
+        write_results(results, self.out)  # strict JSON, paths relative to the study folder
         from .report import write_report
 
         write_report(results, self.out / "report.html")
