@@ -6,10 +6,16 @@ correctly, i.e. per-class *recall*; both are reported. Test sets of ~136 profile
 are small, so every figure carries a percentile bootstrap interval (test profiles
 resampled with replacement, ``n_boot`` times, from ``random_state``).
 
-Conventions (as scikit-learn with ``zero_division=0``): a class never predicted has
-precision 0; balanced accuracy is the mean recall over the classes present in
-``y_true``. In a bootstrap resample where a class is absent (recall undefined) or
-never predicted (precision undefined) that resample is left out of the interval.
+Undefined is not zero: a class never predicted has precision None (``null`` in
+JSON, "–" on screen; scikit-learn's ``zero_division=0`` would say 0), a class absent
+from ``y_true`` has recall None; balanced accuracy is the mean recall over the
+classes present in ``y_true``. Over several training runs a figure is the mean over
+the runs that define it, with their count (``precision_runs``). In a bootstrap
+resample where a class is absent (recall undefined) or never predicted (precision
+undefined) that resample is left out of the interval.
+
+A **degenerate** result (:func:`degenerate`, the one rule the study's verdicts and the
+verbs share): a class that no training run recognises (its recall 0 in every run).
 """
 from __future__ import annotations
 
@@ -74,7 +80,8 @@ def evaluate(y_true, y_pred, labels=None, n_boot: int = 1000, random_state=0) ->
     Returns a JSON-serialisable dict: ``accuracy``, ``balanced_accuracy``,
     ``confusion_matrix`` (rows true, columns predicted, in ``labels`` order),
     ``labels``, ``n``, ``per_class`` {label: {precision, recall, n}} (recall is the
-    paper's per-class "precision"; ``n`` the true-class count) and ``ci``:
+    paper's per-class "precision"; ``n`` the true-class count; precision None for a
+    class never predicted, recall None for a class absent from ``y_true``) and ``ci``:
     {accuracy: [lo, hi], balanced_accuracy: [lo, hi], per_class: {label:
     {precision: [lo, hi] | None, recall: [lo, hi] | None}}}, 95% percentile
     bootstrap intervals; ``n_boot`` = 0 skips them (``ci`` = {}).
@@ -84,7 +91,7 @@ def evaluate(y_true, y_pred, labels=None, n_boot: int = 1000, random_state=0) ->
     cm = _confusions(t, p, k, np.arange(t.size)[None, :])
     acc, bal, prec, rec = _rates(cm)
     support = cm[0].sum(axis=1)
-    per_class = {lab: {"precision": float(np.nan_to_num(prec[0, i], nan=0.0)),
+    per_class = {lab: {"precision": None if np.isnan(prec[0, i]) else float(prec[0, i]),
                        "recall": float(np.nan_to_num(rec[0, i], nan=0.0)) if support[i] else None,
                        "n": int(support[i])}
                  for i, lab in enumerate(labels)}
@@ -146,7 +153,9 @@ def evaluate_runs(y_true, y_preds, labels=None, n_boot: int = 1000, resamples=No
     ``uniforms`` for several classifiers: paired intervals.
 
     Returns :func:`evaluate`'s layout plus ``runs`` (per run: accuracy, balanced
-    accuracy, recall and precision per class), ``n_runs``, ``seeds`` and
+    accuracy, recall and precision per class), ``per_class[c]["precision_runs"]`` (the
+    runs that predict c at all: the precision is their mean, None when there are
+    none), ``n_runs``, ``seeds`` and
     ``seed_spread`` ({balanced_accuracy: [min, max], sd}); ``ci`` also says
     ``method``.
     """
@@ -170,8 +179,9 @@ def evaluate_runs(y_true, y_preds, labels=None, n_boot: int = 1000, resamples=No
     bal = np.array([r["balanced_accuracy"] for r in runs])
     per_class = {}
     for i, lab in enumerate(labels):
-        prec = mean([r["precision"][lab] for r in runs])
-        per_class[lab] = {"precision": 0.0 if prec is None else prec,
+        precisions = [r["precision"][lab] for r in runs]
+        per_class[lab] = {"precision": mean(precisions),  # over the runs that predict the class (None: none)
+                          "precision_runs": sum(v is not None for v in precisions),
                           "recall": mean([r["recall"][lab] for r in runs]) if support[i] else None,
                           "n": int(support[i])}
     out = {"accuracy": float(np.mean([r["accuracy"] for r in runs])), "balanced_accuracy": float(bal.mean()),
@@ -234,6 +244,35 @@ def paired_difference(point_a, point_b, scores_a: np.ndarray, scores_b: np.ndarr
     return {"difference": float(np.mean(point_a) - np.mean(point_b)), "ci": _interval(d)}
 
 
+def degenerate(m: dict, classes=None) -> dict:
+    """The degenerate rule on metrics of :func:`evaluate` or :func:`evaluate_runs`:
+    ``degenerate`` when a class of ``classes`` (default: the labels) is recognised by
+    no training run (recall 0 in every run); ``zero_recall`` those classes,
+    ``never_predicted`` the classes no run predicts, ``degenerate_runs`` {class: runs
+    with recall 0} for the classes only some runs miss, ``n_runs``."""
+    labels = list(m["labels"])
+    classes = labels if classes is None else list(classes)
+    cm = np.asarray(m["confusion_matrix"])
+    never = [labels[j] for j in range(len(labels)) if cm[:, j].sum() == 0]
+    zero = [c for c in classes if (m["per_class"].get(c) or {}).get("recall") == 0.0]
+    runs = m.get("runs") or []
+    partly = {c: sum(1 for r in runs if (r["recall"] or {}).get(c) == 0.0) for c in classes if c not in zero}
+    return {"degenerate": bool(zero), "zero_recall": zero, "never_predicted": never,
+            "degenerate_runs": {c: k for c, k in partly.items() if k}, "n_runs": len(runs) or 1}
+
+
+def degenerate_words(v: dict) -> list[str]:
+    """:func:`degenerate`'s verdict in words: ['degenerate: recognises no HELI (never
+    predicts HELI)'] and/or ['recognises no QUAD in 1 of 3 runs']; [] when none."""
+    parts = []
+    if v["degenerate"]:
+        never = [c for c in v["never_predicted"] if c in v["zero_recall"]]
+        parts.append(f"degenerate: recognises no {', '.join(v['zero_recall'])}"
+                     + (f" (never predicts {', '.join(never)})" if never else ""))
+    parts += [f"recognises no {c} in {k} of {v['n_runs']} runs" for c, k in v.get("degenerate_runs", {}).items()]
+    return parts
+
+
 def format_metrics(m: dict) -> str:
     """A short human-readable report of :func:`evaluate`'s dict."""
     ci = m.get("ci") or {}
@@ -252,7 +291,7 @@ def format_metrics(m: dict) -> str:
     undefined = False
     for j, (lab, pc) in enumerate(m["per_class"].items()):
         cc = ci.get("per_class", {}).get(lab, {})
-        never = m["labels"][j] == lab and predicted[j] == 0
+        never = pc.get("precision") is None or (m["labels"][j] == lab and predicted[j] == 0)
         undefined |= bool(never)
         precision = "     –" if never else fmt(pc["precision"], cc.get("precision"))
         lines.append(f"  {lab:>8s} n={pc['n']:<5d} recall {fmt(pc['recall'], cc.get('recall'))}"
@@ -264,6 +303,9 @@ def format_metrics(m: dict) -> str:
         lines.append(f"  {lab:>{width}s} " + " ".join(f"{v:>{max(width, 6)}d}" for v in row))
     if undefined:
         lines.append("precision – = undefined: the class is never predicted")
+    words = degenerate_words(degenerate(m))
+    if words:
+        lines.append("verdict: " + "; ".join(words))
     if ci:
         lines.append(f"[..] = {ci['level']:.0%} bootstrap intervals ({ci['n_boot']} resamples)")
     return "\n".join(lines)

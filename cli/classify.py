@@ -60,7 +60,25 @@ def run_train(args) -> int:
         s = model.split_scores_
         result(f"best epoch {s['best_epoch']}/{s['epochs_run']}: validation accuracy {s['val_accuracy']:.3f}; "
                f"held-out 10% split ({s['n_test']} profiles) accuracy {s['test_accuracy']:.3f}")
+    result(training_verdict(model, data))
     return 0
+
+
+def training_verdict(model, data, what: str = "its training profiles", per_class: int = 1000) -> str:
+    """The degenerate rule (:func:`mdaug.classify.metrics.degenerate`, the study's) on up
+    to ``per_class`` profiles of each class of ``data`` (evenly spaced), as one line."""
+    import numpy as np
+
+    from ..classify.metrics import degenerate, degenerate_words, evaluate
+
+    labels = np.asarray(data.labels).astype(str)
+    idx = np.concatenate([rows[np.linspace(0, rows.size - 1, min(per_class, rows.size)).astype(int)]
+                          for rows in (np.flatnonzero(labels == c) for c in data.classes)])
+    m = evaluate(labels[idx], model.predict(data.profiles[idx]), labels=model.classes_.tolist(), n_boot=0)
+    words = degenerate_words(degenerate(m))
+    recalls = ", ".join(f"{c} {pc['recall']:.3f}" for c, pc in m["per_class"].items() if pc["recall"] is not None)
+    return (f"verdict on {idx.size} of {what}: "
+            + ("; ".join(words) if words else "not degenerate") + f" (recall {recalls})")
 
 
 def add_train(sub, parents, help):
@@ -204,6 +222,7 @@ def run_baseline(args) -> int:
         n_aug = args.n_per_class * len(data.classes)
         result(f"trained the tsaug-baseline CNN on {n_aug:,} tsaug-augmented profiles ({args.n_per_class:,} per "
                f"class) made from the {len(data)} measured profiles of {args.data}; wrote {args.out}")
+        result(training_verdict(model, data, f"the measured profiles of {args.data}"))
         for path, test in tests.items():
             x, y = _check_test(model, test, path)
             report[str(path)] = evaluate(y, model.predict(x), labels=model.classes_.tolist(), random_state=args.seed)
