@@ -74,7 +74,7 @@ def _interval(values: np.ndarray) -> list[float] | None:
     return [float(lo), float(hi)]
 
 
-def evaluate(y_true, y_pred, labels=None, n_boot: int = 1000, random_state=0) -> dict:
+def evaluate(y_true, y_pred, labels=None, n_boot: int = 1000, random_state=0, clusters=None) -> dict:
     """Metrics of predictions ``y_pred`` (N,) against ``y_true`` (N,).
 
     Returns a JSON-serialisable dict: ``accuracy``, ``balanced_accuracy``,
@@ -84,7 +84,9 @@ def evaluate(y_true, y_pred, labels=None, n_boot: int = 1000, random_state=0) ->
     class never predicted, recall None for a class absent from ``y_true``) and ``ci``:
     {accuracy: [lo, hi], balanced_accuracy: [lo, hi], per_class: {label:
     {precision: [lo, hi] | None, recall: [lo, hi] | None}}}, 95% percentile
-    bootstrap intervals; ``n_boot`` = 0 skips them (``ci`` = {}).
+    bootstrap intervals; ``n_boot`` = 0 skips them (``ci`` = {}). ``clusters`` (N,): the
+    drone of each test item: the resamples are two-stage, drones then their items
+    (:func:`resample_indices`); ``ci["method"]`` says which.
     """
     t, p, labels = _encode(y_true, y_pred, labels)
     k = len(labels)
@@ -102,12 +104,14 @@ def evaluate(y_true, y_pred, labels=None, n_boot: int = 1000, random_state=0) ->
         rng = seeded_rng(random_state)
         ci_acc, ci_bal = [], []
         ci_prec, ci_rec = [], []
+        drawn = None if clusters is None else resample_indices(t.size, n_boot, rng, clusters, t)
         for lo in range(0, n_boot, 500):  # bounded memory: (500, n) indices at a time
-            idx = rng.integers(0, t.size, size=(min(500, n_boot - lo), t.size))
+            idx = rng.integers(0, t.size, size=(min(500, n_boot - lo), t.size)) if drawn is None \
+                else drawn[lo:lo + 500]
             a, b, pr, rc = _rates(_confusions(t, p, k, idx))
             ci_acc.append(a), ci_bal.append(b), ci_prec.append(pr), ci_rec.append(rc)
         pr, rc = np.concatenate(ci_prec), np.concatenate(ci_rec)
-        out["ci"] = {"level": LEVEL, "n_boot": int(n_boot),
+        out["ci"] = {"level": LEVEL, "n_boot": int(n_boot), "method": bootstrap_method(clusters, t),
                      "accuracy": _interval(np.concatenate(ci_acc)),
                      "balanced_accuracy": _interval(np.concatenate(ci_bal)),
                      "per_class": {lab: {"precision": _interval(pr[:, i]), "recall": _interval(rc[:, i])}
@@ -115,11 +119,51 @@ def evaluate(y_true, y_pred, labels=None, n_boot: int = 1000, random_state=0) ->
     return out
 
 
-def resample_indices(n: int, n_boot: int, random_state=0) -> np.ndarray:
+def resample_indices(n: int, n_boot: int, random_state=0, clusters=None, strata=None) -> np.ndarray:
     """(n_boot, n) bootstrap resamples of n test items (with replacement), from
     ``random_state``; the same arguments give the same resamples, so results scored
-    on one set with one ``random_state`` are paired."""
-    return seeded_rng(random_state).integers(0, n, size=(int(n_boot), int(n)))
+    on one set with one ``random_state`` are paired.
+
+    ``clusters`` (n,): the drone of each item (any hashable ids; None: every item
+    resampled on its own). Then the resample is two-stage, within each stratum
+    (``strata`` (n,), the true class: a drone is one class; None: one stratum): every
+    drone slot of the stratum is filled by a drone drawn with replacement, and the
+    slot's number of items is drawn with replacement from that drone's items. The
+    class counts and the number of items stay as in the set; when a drone's items are
+    alike, the interval reflects how few drones there are (the drone-level spread),
+    not how many acquisitions."""
+    n, n_boot = int(n), int(n_boot)
+    rng = seeded_rng(random_state)
+    if clusters is None:
+        return rng.integers(0, n, size=(n_boot, n))
+    clusters = np.asarray(clusters).astype(str)
+    strata = np.zeros(n, dtype=int) if strata is None else np.asarray(strata)
+    if clusters.shape != (n,) or strata.shape != (n,):
+        raise ValueError(f"clusters and strata must have one entry per item ({n}), got {clusters.shape}, "
+                         f"{strata.shape}")
+    out = np.empty((n_boot, n), dtype=np.int64)
+    for stratum in np.unique(strata):
+        rows = np.flatnonzero(strata == stratum)
+        ids, inverse = np.unique(clusters[rows], return_inverse=True)
+        members = [rows[inverse == k] for k in range(ids.size)]  # each drone's items, in order
+        flat = np.concatenate(members)
+        start = np.cumsum([0] + [m.size for m in members[:-1]])
+        size = np.array([m.size for m in members])
+        for slot in members:  # the slot's positions in the resample take items of a drawn drone
+            drone = rng.integers(0, ids.size, size=n_boot)
+            pos = (rng.random((n_boot, slot.size)) * size[drone][:, None]).astype(np.int64)
+            out[:, slot] = flat[start[drone][:, None] + np.minimum(pos, size[drone][:, None] - 1)]
+    return out
+
+
+def bootstrap_method(clusters, strata=None) -> str:
+    """What the resamples of :func:`resample_indices` resample, in words."""
+    if clusters is None:
+        return "percentile bootstrap over the test items"
+    pairs = np.asarray(clusters).astype(str) if strata is None else \
+        np.char.add(np.char.add(np.asarray(strata).astype(str), "/"), np.asarray(clusters).astype(str))
+    return (f"percentile bootstrap over the {np.unique(pairs).size} drones (clusters) and then the acquisitions "
+            "within them, per class")
 
 
 def seed_uniforms(n_boot: int, n_runs: int, random_state=0) -> np.ndarray:
@@ -137,7 +181,7 @@ def _point(cm: np.ndarray, labels) -> dict:
 
 
 def evaluate_runs(y_true, y_preds, labels=None, n_boot: int = 1000, resamples=None, uniforms=None,
-                  random_state=0, seeds=None) -> dict:
+                  random_state=0, seeds=None, clusters=None) -> dict:
     """Metrics of S training runs (seeds) of one classifier on one test set.
 
     ``y_preds`` (S, N): each run's predictions of the N test items ``y_true``. Every
@@ -150,7 +194,10 @@ def evaluate_runs(y_true, y_preds, labels=None, n_boot: int = 1000, resamples=No
     interval of that mixture is where one training run scores on a test sample of
     this size, so it holds every run's own score (each run is 1/S of the mixture).
     With S = 1 it is the ordinary percentile bootstrap. Same ``resamples`` and
-    ``uniforms`` for several classifiers: paired intervals.
+    ``uniforms`` for several classifiers: paired intervals. ``clusters`` (N,): the drone
+    of each test item: the resamples drawn here are two-stage (drones, then their
+    acquisitions: :func:`resample_indices`), and ``ci["method"]`` says so (give it with
+    ``resamples`` drawn that way).
 
     Returns :func:`evaluate`'s layout plus ``runs`` (per run: accuracy, balanced
     accuracy, recall and precision per class), ``per_class[c]["precision_runs"]`` (the
@@ -193,7 +240,7 @@ def evaluate_runs(y_true, y_preds, labels=None, n_boot: int = 1000, resamples=No
     if not n_boot:
         return out
     if resamples is None:
-        resamples = resample_indices(n, n_boot, random_state)
+        resamples = resample_indices(n, n_boot, random_state, clusters, None if clusters is None else t)
     resamples = np.asarray(resamples)
     if resamples.ndim != 2 or resamples.shape[1] != n:
         raise ValueError(f"resamples must be (n_boot, {n}) indices, got shape {resamples.shape}")
@@ -209,8 +256,8 @@ def evaluate_runs(y_true, y_preds, labels=None, n_boot: int = 1000, resamples=No
         acc_b.append(a), bal_b.append(bb), prec_b.append(pr), rec_b.append(rc)
     pr, rc = np.concatenate(prec_b), np.concatenate(rec_b)
     out["ci"] = {"level": LEVEL, "n_boot": int(len(resamples)),
-                 "method": "percentile bootstrap over the test items, one training run picked at random per "
-                           f"resample ({s} run(s))",
+                 "method": f"{bootstrap_method(clusters, t)}, one training run picked at random per resample "
+                           f"({s} run(s))",
                  "accuracy": _interval(np.concatenate(acc_b)),
                  "balanced_accuracy": _interval(np.concatenate(bal_b)),
                  "per_class": {lab: {"precision": _interval(pr[:, i]), "recall": _interval(rc[:, i])}

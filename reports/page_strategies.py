@@ -125,7 +125,8 @@ def ceiling_line(r: dict, j: dict, test: str):
 
 
 NOTE = ("<p class='note'>Each figure is the mean over the CNN's training runs (seeds). Intervals: 95%, covering "
-        "the test sample and the training runs (a bootstrap of the test acquisitions, one run picked at random "
+        "the test sample and the training runs (a bootstrap of the test set's drones, where the set says which "
+        "drone made each acquisition, and then their acquisitions; one run picked at random "
         "in each resample: where one training run scores on a test sample like this one; it holds every run's own "
         "score). The same resamples and picks serve every strategy and the ceiling, so their differences "
         "(the finding) are paired. Recall of a class is the share of its acquisitions classified correctly (the "

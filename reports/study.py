@@ -108,7 +108,7 @@ class Study(TrainingStages):
             sets["select"] = (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
         for name, path in self.cfg.data.test.items():
             ps = load_profiles(path)
-            sets[name] = (ps.profiles, ps.labels)
+            sets[name] = (ps.profiles, ps.labels, *([ps.extra["specimen"]] if "specimen" in ps.extra else []))
             acqs.append((path, acquisition_from_file(ps.extra, path)))
         stated = [(p, a) for p, a in acqs if a is not None]
         k = self.cfg.protocol.acquisition_ramps
@@ -143,11 +143,11 @@ class Study(TrainingStages):
             select[cls] = (camp.profiles[rest], camp.labels[rest], camp.specimen[rest])
             n = sim.n_new.get(cls, 44)
             camp = simulate_campaign(cls, sim.new_specimens, n, _stage_seed(self.cfg, "new", cls), scene=scene)
-            new[cls] = (camp.profiles, camp.labels)
+            new[cls] = (camp.profiles, camp.labels, camp.specimen)
             if sim.large_factor > 1:
                 camp = simulate_campaign(cls, 2 * sim.new_specimens, n * sim.large_factor,
                                          _stage_seed(self.cfg, "new_large", cls), scene=scene)
-                large[cls] = (camp.profiles, camp.labels)
+                large[cls] = (camp.profiles, camp.labels, camp.specimen)
 
         def cat(parts):
             return tuple(np.concatenate([p[i] for p in parts.values()]) for i in range(len(next(iter(parts.values())))))
@@ -160,6 +160,13 @@ class Study(TrainingStages):
     def load_set(self, name: str):
         ps = load_profiles(self.out / "data" / f"{name}.npz")
         return ps.profiles, ps.labels
+
+    def set_drones(self, name: str):
+        """The drone id (within its class) of each acquisition of a stored set, None when
+        the set does not say (the bootstrap's clusters, :mod:`.statistics`)."""
+        path = self.out / "data" / f"{name}.npz"
+        extra = load_profiles(path).extra if path.is_file() else {}
+        return np.asarray(extra["specimen"]).astype(str) if "specimen" in extra else None
 
     def load_drones(self, name: str, cls: str) -> np.ndarray:
         """The drone id of each profile of class ``cls`` in a stored set ("0" when unknown)."""
@@ -236,7 +243,7 @@ class Study(TrainingStages):
     def candidates(self, specs: dict, select, tests: dict, executor) -> dict:
         p = self.cfg.protocol
         sel_name, sel_data, _ = select
-        sets = {sel_name: sel_data, **tests}
+        sets = {n: (*xy, self.set_drones(n)) for n, xy in {sel_name: sel_data, **tests}.items()}
 
         def compute():
             todo = [(name, i, s) for name, ss in specs.items() if STRATEGIES[name].parameter is not None
@@ -318,8 +325,8 @@ class Study(TrainingStages):
         finally:
             executor.close()
         classes = list(self.cfg.classes)
-        truth = {sel_name: statistics.truth(select[1][1], sorted(classes)),
-                 **{n: statistics.truth(yt, sorted(classes)) for n, (_, yt) in tests.items()}}
+        truth = {n: statistics.truth(yt, sorted(classes), self.set_drones(n))
+                 for n, (_, yt) in {sel_name: select[1], **tests}.items()}
         results = {
             "config": self.cfg.to_dict(), "invocation": self.invocation, "simulated": self.cfg.simulated,
             "data": index["sets"], "acquisition": index["acquisition"], "acquisition_text": acq.describe(),
