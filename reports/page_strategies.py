@@ -63,7 +63,7 @@ def metric_cells(w: Html, base: str, m: dict, classes, precision: bool = True, r
                             f"{base}.ci.per_class.{c}.precision", cc.get("precision"), br=True)
             defined, runs_ = pc.get("precision_runs"), m.get("n_runs") or 1
             if defined is not None and defined < runs_:  # the mean is over the runs that predict the class
-                cell += f"<br><span class='ci'>{defined} of {runs_} runs</span>"
+                cell += f"<br><span class='ci'>over the {defined} of {runs_} runs that predict {c}</span>"
             cells.append(td(cell))
     return cells
 
