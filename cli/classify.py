@@ -9,7 +9,7 @@ from pathlib import Path
 from .common import (SECONDS_CNN_PROFILE, SECONDS_RESAMPLE, SECONDS_TREE_BIN, SECONDS_TSAUG, add_verb, check_size,
                      check_training_memory, count_2, info, load_profile_file, nonneg_int, nothing_written, path_list,
                      positive_int, result, seed_int)
-from .options import add_classifier_options, model_params
+from .options import add_classifier_options, add_device_option, model_params
 
 CNN_BINS = 400  # the CNN's 1 x 20 x 20 input
 
@@ -107,6 +107,11 @@ def run_evaluate(args) -> int:
     check_paths(inputs=[("MODEL", args.model), ("TEST", args.test)],
                 outputs=[Output("--json", args.json, "json"), Output("--plot", args.plot, "plot")])
     model = load_model(args.model)
+    if model.name == "cnn":
+        from ..classify.cnn import resolve_device
+
+        resolve_device(args.device)  # 'cuda' without a GPU: refused before any work
+        model.device = args.device
     test = load_profile_file(args.test)
     x, y = _check_test(model, test, args.test)
     check_boot_size(args.n_boot, len(y))
@@ -138,6 +143,7 @@ def add_evaluate(sub, parents, help):
     p.add_argument("--n-boot", type=nonneg_int, default=1000, metavar="N",
                    help="bootstrap resamples of the intervals, 0 = no intervals (default: %(default)s)")
     p.add_argument("--seed", type=seed_int, default=0, help="bootstrap seed (default: %(default)s)")
+    add_device_option(p)
     p.set_defaults(func=run_evaluate)
     return p
 

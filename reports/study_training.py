@@ -54,7 +54,8 @@ class TrainingStages:
                          "n_per_class": p.tsaug_n_per_class if tsaug else p.cnn_n_per_class, "tests": sets,
                          "seed": seed, "run_seeds": run_seeds(seed, self.cfg.seed, p.cnn_seeds, "cnn", name),
                          "model_params": {"epochs": p.tsaug_epochs if tsaug else p.cnn_epochs,
-                                          "patience": p.cnn_patience, "normalisation": p.normalisation},
+                                          "patience": p.cnn_patience, "normalisation": p.normalisation,
+                                          "device": self.cfg.device},
                          "model_path": str(self.out / "models" / f"cnn_{name}_run{{run}}.zip")}
         return out
 
@@ -103,7 +104,8 @@ class TrainingStages:
             work = []
             for model in CEILING_MODELS:  # the CNN: like for like with the strategies' CNNs
                 first = child_seed(self.cfg.seed, "ceiling", model)
-                params = {"epochs": p.cnn_epochs, "patience": p.cnn_patience} if model == "cnn" else {}
+                params = {"epochs": p.cnn_epochs, "patience": p.cnn_patience, "device": self.cfg.device} \
+                    if model == "cnn" else {}
                 for seed in run_seeds(first, self.cfg.seed, p.cnn_seeds if model == "cnn" else 1, "ceiling", model):
                     work.append({"model": model, "seed": seed, "params": params, "X": X, "y": y, "tests": sets,
                                  "classes": classes})
