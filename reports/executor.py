@@ -1,8 +1,10 @@
 """One executor interface for the study's independent jobs.
 
-``executor.map(fn, items)`` returns results in order. ``fn`` must be a picklable
-top-level function and each item carries its own seed, so results do not depend on
-which executor ran them.
+``executor.map(fn, items)`` yields results in order, each as soon as it and those
+before it are done (so the study logs each stage's end when it ends, not when the
+last job does). ``fn`` must be a picklable top-level function and each item carries
+its own seed, so results do not depend on which executor ran them. Workers draw no
+bars; each job logs its own start and end there (:func:`mdaug.reports.jobs.announced`).
 
 * :class:`SerialExecutor`: in this process (the default with one worker);
 * :class:`ProcessExecutor`: local processes (concurrent.futures);
@@ -36,7 +38,7 @@ class ProcessExecutor:
             from ..radar.progress import quiet_worker
 
             self._pool = ProcessPoolExecutor(max_workers=self.workers, initializer=quiet_worker)
-        return list(self._pool.map(fn, items))
+        return self._pool.map(fn, items)  # an iterator: results in order, as they come
 
     def close(self) -> None:
         if self._pool is not None:
@@ -59,7 +61,7 @@ class DaskExecutor:
 
     def map(self, fn, items):
         futures = self.client.map(fn, list(items), pure=False)
-        return self.client.gather(futures)
+        return (f.result() for f in futures)  # in order, as they come
 
     def close(self) -> None:
         self.client.close()

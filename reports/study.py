@@ -215,6 +215,8 @@ class Study(TrainingStages):
         todo = [c for c in self.cfg.classes if not self.cache.has(f"calibrate_{c}", settings_key(self.calib_key, c))]
         if len(todo) > 1 and self.cfg.workers > 1:
             work = [self._calibration_job(c, acquisition) for c in todo]
+            for c in todo:
+                self.cache.started(f"calibrate_{c}")
             for c, res in zip(todo, executor.map(jobs.calibrate_class, work)):
                 self.cache.store(f"calibrate_{c}", settings_key(self.calib_key, c), _jsonable(res), res["seconds"])
         return {c: self.calibrate(c, acquisition) for c in self.cfg.classes}

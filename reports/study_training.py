@@ -66,6 +66,8 @@ class TrainingStages:
         """Every strategy's stage result (cached; uncached strategies go to the executor together)."""
         todo = [j for name, j in cnn_jobs.items() if not self.cache.has(f"cnn_{name}", self._cnn_key(j))]
         if len(todo) > 1 and self.cfg.workers > 1:
+            for job in todo:
+                self.cache.started(f"cnn_{job['name']}")
             for job, res in zip(todo, executor.map(jobs.train_and_test, todo)):
                 self.cache.store(f"cnn_{job['name']}", self._cnn_key(job), res,
                                  res["data_seconds"] + res["train_seconds"])
