@@ -72,3 +72,19 @@ def test_evaluate_on_the_cpu(tmp_path, capsys):
     assert main(["evaluate", str(tmp_path / "c.zip"), str(tmp_path / "d.npz"), "--n-boot", "0",
                  "--device", "cpu"]) == 0
     assert "balanced accuracy" in capsys.readouterr().out
+
+
+def test_bfloat16_autocast_is_opt_in_reproducible_and_saved(tmp_path):
+    x, y = _data()
+    with pytest.raises(ValueError, match="precision must be one of"):
+        CNNClassifier(precision="float16")
+    assert CNNClassifier().precision == "float32"
+    a = make_classifier("cnn", random_state=2, epochs=2, progress=False, device="cpu", precision="bfloat16").fit(x, y)
+    b = make_classifier("cnn", random_state=2, epochs=2, progress=False, device="cpu", precision="bfloat16").fit(x, y)
+    f = make_classifier("cnn", random_state=2, epochs=2, progress=False, device="cpu").fit(x, y)
+    assert np.array_equal(a.predict_proba(x), b.predict_proba(x))  # the same seed, the same model
+    assert not np.array_equal(a.predict_proba(x), f.predict_proba(x))  # bfloat16 did run
+    save_model(a, tmp_path / "bf16.zip")
+    back = load_model(tmp_path / "bf16.zip")
+    assert back.precision == "bfloat16"
+    assert np.array_equal(back.predict_proba(x), a.predict_proba(x))
