@@ -6,8 +6,8 @@
 * every path relative to the study folder: the files the study wrote under it
   (``data/new.npz``, ``figures/profiles.png``) and the input files of a study config
   (``../new.npz``), so a study folder can be moved or copied to another machine.
-  A string counts as a path when it is absolute and lies under the study folder, or
-  names an existing file or folder.
+  A string counts as a path when it lies under the study folder (as the folder was
+  given, relative or absolute), or is absolute and names an existing file or folder.
 """
 from __future__ import annotations
 
@@ -23,8 +23,11 @@ from ..radar import atomic_write
 
 def plain(obj, folder: Path):
     """``obj`` as JSON-ready Python: non-finite floats as None, paths relative to ``folder``."""
-    folder = Path(folder).absolute()
-    prefixes = tuple({str(folder) + os.sep, str(folder.resolve()) + os.sep})
+    given = Path(folder)
+    folder = given.absolute()
+    # the folder as the study was given it (a relative --out gives paths relative to the working
+    # directory), as an absolute path, and with its links resolved
+    prefixes = tuple({str(given) + os.sep, str(folder) + os.sep, str(folder.resolve()) + os.sep})
 
     def convert(v):
         if isinstance(v, dict):
@@ -39,9 +42,11 @@ def plain(obj, folder: Path):
             return v if math.isfinite(v) else None
         if isinstance(v, Path):
             v = str(v)
-        if isinstance(v, str) and os.path.isabs(v) and (v.startswith(prefixes) or os.path.exists(v)):
+        if isinstance(v, str) and v.startswith(prefixes):
             base = folder.resolve() if v.startswith(str(folder.resolve()) + os.sep) else folder
-            return os.path.relpath(v, base)
+            return os.path.relpath(os.path.abspath(v), base)
+        if isinstance(v, str) and os.path.isabs(v) and os.path.exists(v):
+            return os.path.relpath(v, folder)
         return v
 
     return convert(obj)

@@ -70,7 +70,7 @@ class TrainingStages:
                 self.cache.started(f"cnn_{job['name']}")
             for job, res in zip(todo, executor.map(jobs.train_and_test, todo)):
                 self.cache.store(f"cnn_{job['name']}", self._cnn_key(job), res,
-                                 res["data_seconds"] + res["train_seconds"])
+                                 res["data_seconds"] + res["train_seconds"], " in a worker (data and training)")
         return {name: self.cache.run(f"cnn_{name}", self._cnn_key(j), lambda j=j: jobs.train_and_test(j))
                 for name, j in cnn_jobs.items()}
 

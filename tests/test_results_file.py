@@ -2,6 +2,7 @@
 import json
 import math
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -62,3 +63,11 @@ def test_plain_keeps_finite_numbers_and_plain_strings(tmp_path):
     out = plain({"a": [1, 2.5, "HELI", "/not/a/path/here"], "b": {"c": np.float32(0.25)}}, tmp_path)
     assert out == {"a": [1, 2.5, "HELI", "/not/a/path/here"], "b": {"c": 0.25}}
     assert math.isfinite(out["b"]["c"])
+
+
+def test_a_study_folder_given_relative_gives_paths_relative_to_it(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "study" / "data").mkdir(parents=True)
+    back = _strict(write_results({"data": {"new": {"path": os.path.join("study", "data", "new.npz")}},
+                                  "other": "studying"}, Path("study")).read_text())
+    assert back["data"]["new"]["path"] == os.path.join("data", "new.npz") and back["other"] == "studying"

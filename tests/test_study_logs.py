@@ -79,7 +79,7 @@ def test_cnn_stages_in_workers_log_start_runs_and_end(tmp_path, capfd):
     for name in ("sigma_p_published", "tsaug"):
         start = lines.index(f"[cnn_{name}] running (sent to the workers) ...")
         end = next(i for i, ln in enumerate(lines) if ln.startswith(f"[cnn_{name}] done in ")
-                   and ln.endswith(" s in a worker"))
+                   and ln.endswith(" s in a worker (data and training)"))
         assert start < end
     out = capfd.readouterr().out
     for name in ("sigma_p_published", "tsaug"):
