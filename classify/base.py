@@ -13,6 +13,10 @@ from ..radar import check_normalisation
 from .preprocess import as_profiles, preprocess
 
 
+DEVICES = ("auto", "cpu", "cuda")
+"""Where the torch models run: "auto" (a CUDA GPU when torch sees one, else the CPU)."""
+
+
 class ProfileClassifier:
     """Base class. Subclasses set ``name`` and implement ``_fit(X, yi)`` and
     ``_proba(X)`` on preprocessed float32 (N, L) profiles and integer labels

@@ -6,10 +6,16 @@ correctly, i.e. per-class *recall*; both are reported. Test sets of ~136 profile
 are small, so every figure carries a percentile bootstrap interval (test profiles
 resampled with replacement, ``n_boot`` times, from ``random_state``).
 
-Conventions (as scikit-learn with ``zero_division=0``): a class never predicted has
-precision 0; balanced accuracy is the mean recall over the classes present in
-``y_true``. In a bootstrap resample where a class is absent (recall undefined) or
-never predicted (precision undefined) that resample is left out of the interval.
+Undefined is not zero: a class never predicted has precision None (``null`` in
+JSON, "–" on screen; scikit-learn's ``zero_division=0`` would say 0), a class absent
+from ``y_true`` has recall None; balanced accuracy is the mean recall over the
+classes present in ``y_true``. Over several training runs a figure is the mean over
+the runs that define it, with their count (``precision_runs``). In a bootstrap
+resample where a class is absent (recall undefined) or never predicted (precision
+undefined) that resample is left out of the interval.
+
+A **degenerate** result (:func:`degenerate`, the one rule the study's verdicts and the
+verbs share): a class that no training run recognises (its recall 0 in every run).
 """
 from __future__ import annotations
 
@@ -68,23 +74,26 @@ def _interval(values: np.ndarray) -> list[float] | None:
     return [float(lo), float(hi)]
 
 
-def evaluate(y_true, y_pred, labels=None, n_boot: int = 1000, random_state=0) -> dict:
+def evaluate(y_true, y_pred, labels=None, n_boot: int = 1000, random_state=0, clusters=None) -> dict:
     """Metrics of predictions ``y_pred`` (N,) against ``y_true`` (N,).
 
     Returns a JSON-serialisable dict: ``accuracy``, ``balanced_accuracy``,
     ``confusion_matrix`` (rows true, columns predicted, in ``labels`` order),
     ``labels``, ``n``, ``per_class`` {label: {precision, recall, n}} (recall is the
-    paper's per-class "precision"; ``n`` the true-class count) and ``ci``:
+    paper's per-class "precision"; ``n`` the true-class count; precision None for a
+    class never predicted, recall None for a class absent from ``y_true``) and ``ci``:
     {accuracy: [lo, hi], balanced_accuracy: [lo, hi], per_class: {label:
     {precision: [lo, hi] | None, recall: [lo, hi] | None}}}, 95% percentile
-    bootstrap intervals; ``n_boot`` = 0 skips them (``ci`` = {}).
+    bootstrap intervals; ``n_boot`` = 0 skips them (``ci`` = {}). ``clusters`` (N,): the
+    drone of each test item: the resamples are two-stage, drones then their items
+    (:func:`resample_indices`); ``ci["method"]`` says which.
     """
     t, p, labels = _encode(y_true, y_pred, labels)
     k = len(labels)
     cm = _confusions(t, p, k, np.arange(t.size)[None, :])
     acc, bal, prec, rec = _rates(cm)
     support = cm[0].sum(axis=1)
-    per_class = {lab: {"precision": float(np.nan_to_num(prec[0, i], nan=0.0)),
+    per_class = {lab: {"precision": None if np.isnan(prec[0, i]) else float(prec[0, i]),
                        "recall": float(np.nan_to_num(rec[0, i], nan=0.0)) if support[i] else None,
                        "n": int(support[i])}
                  for i, lab in enumerate(labels)}
@@ -95,12 +104,14 @@ def evaluate(y_true, y_pred, labels=None, n_boot: int = 1000, random_state=0) ->
         rng = seeded_rng(random_state)
         ci_acc, ci_bal = [], []
         ci_prec, ci_rec = [], []
+        drawn = None if clusters is None else resample_indices(t.size, n_boot, rng, clusters, t)
         for lo in range(0, n_boot, 500):  # bounded memory: (500, n) indices at a time
-            idx = rng.integers(0, t.size, size=(min(500, n_boot - lo), t.size))
+            idx = rng.integers(0, t.size, size=(min(500, n_boot - lo), t.size)) if drawn is None \
+                else drawn[lo:lo + 500]
             a, b, pr, rc = _rates(_confusions(t, p, k, idx))
             ci_acc.append(a), ci_bal.append(b), ci_prec.append(pr), ci_rec.append(rc)
         pr, rc = np.concatenate(ci_prec), np.concatenate(ci_rec)
-        out["ci"] = {"level": LEVEL, "n_boot": int(n_boot),
+        out["ci"] = {"level": LEVEL, "n_boot": int(n_boot), "method": bootstrap_method(clusters, t),
                      "accuracy": _interval(np.concatenate(ci_acc)),
                      "balanced_accuracy": _interval(np.concatenate(ci_bal)),
                      "per_class": {lab: {"precision": _interval(pr[:, i]), "recall": _interval(rc[:, i])}
@@ -108,11 +119,51 @@ def evaluate(y_true, y_pred, labels=None, n_boot: int = 1000, random_state=0) ->
     return out
 
 
-def resample_indices(n: int, n_boot: int, random_state=0) -> np.ndarray:
+def resample_indices(n: int, n_boot: int, random_state=0, clusters=None, strata=None) -> np.ndarray:
     """(n_boot, n) bootstrap resamples of n test items (with replacement), from
     ``random_state``; the same arguments give the same resamples, so results scored
-    on one set with one ``random_state`` are paired."""
-    return seeded_rng(random_state).integers(0, n, size=(int(n_boot), int(n)))
+    on one set with one ``random_state`` are paired.
+
+    ``clusters`` (n,): the drone of each item (any hashable ids; None: every item
+    resampled on its own). Then the resample is two-stage, within each stratum
+    (``strata`` (n,), the true class: a drone is one class; None: one stratum): every
+    drone slot of the stratum is filled by a drone drawn with replacement, and the
+    slot's number of items is drawn with replacement from that drone's items. The
+    class counts and the number of items stay as in the set; when a drone's items are
+    alike, the interval reflects how few drones there are (the drone-level spread),
+    not how many acquisitions."""
+    n, n_boot = int(n), int(n_boot)
+    rng = seeded_rng(random_state)
+    if clusters is None:
+        return rng.integers(0, n, size=(n_boot, n))
+    clusters = np.asarray(clusters).astype(str)
+    strata = np.zeros(n, dtype=int) if strata is None else np.asarray(strata)
+    if clusters.shape != (n,) or strata.shape != (n,):
+        raise ValueError(f"clusters and strata must have one entry per item ({n}), got {clusters.shape}, "
+                         f"{strata.shape}")
+    out = np.empty((n_boot, n), dtype=np.int64)
+    for stratum in np.unique(strata):
+        rows = np.flatnonzero(strata == stratum)
+        ids, inverse = np.unique(clusters[rows], return_inverse=True)
+        members = [rows[inverse == k] for k in range(ids.size)]  # each drone's items, in order
+        flat = np.concatenate(members)
+        start = np.cumsum([0] + [m.size for m in members[:-1]])
+        size = np.array([m.size for m in members])
+        for slot in members:  # the slot's positions in the resample take items of a drawn drone
+            drone = rng.integers(0, ids.size, size=n_boot)
+            pos = (rng.random((n_boot, slot.size)) * size[drone][:, None]).astype(np.int64)
+            out[:, slot] = flat[start[drone][:, None] + np.minimum(pos, size[drone][:, None] - 1)]
+    return out
+
+
+def bootstrap_method(clusters, strata=None) -> str:
+    """What the resamples of :func:`resample_indices` resample, in words."""
+    if clusters is None:
+        return "percentile bootstrap over the test items"
+    pairs = np.asarray(clusters).astype(str) if strata is None else \
+        np.char.add(np.char.add(np.asarray(strata).astype(str), "/"), np.asarray(clusters).astype(str))
+    return (f"percentile bootstrap over the {np.unique(pairs).size} drones (clusters) and then the acquisitions "
+            "within them, per class")
 
 
 def seed_uniforms(n_boot: int, n_runs: int, random_state=0) -> np.ndarray:
@@ -130,7 +181,7 @@ def _point(cm: np.ndarray, labels) -> dict:
 
 
 def evaluate_runs(y_true, y_preds, labels=None, n_boot: int = 1000, resamples=None, uniforms=None,
-                  random_state=0, seeds=None) -> dict:
+                  random_state=0, seeds=None, clusters=None) -> dict:
     """Metrics of S training runs (seeds) of one classifier on one test set.
 
     ``y_preds`` (S, N): each run's predictions of the N test items ``y_true``. Every
@@ -143,10 +194,15 @@ def evaluate_runs(y_true, y_preds, labels=None, n_boot: int = 1000, resamples=No
     interval of that mixture is where one training run scores on a test sample of
     this size, so it holds every run's own score (each run is 1/S of the mixture).
     With S = 1 it is the ordinary percentile bootstrap. Same ``resamples`` and
-    ``uniforms`` for several classifiers: paired intervals.
+    ``uniforms`` for several classifiers: paired intervals. ``clusters`` (N,): the drone
+    of each test item: the resamples drawn here are two-stage (drones, then their
+    acquisitions: :func:`resample_indices`), and ``ci["method"]`` says so (give it with
+    ``resamples`` drawn that way).
 
     Returns :func:`evaluate`'s layout plus ``runs`` (per run: accuracy, balanced
-    accuracy, recall and precision per class), ``n_runs``, ``seeds`` and
+    accuracy, recall and precision per class), ``per_class[c]["precision_runs"]`` (the
+    runs that predict c at all: the precision is their mean, None when there are
+    none), ``n_runs``, ``seeds`` and
     ``seed_spread`` ({balanced_accuracy: [min, max], sd}); ``ci`` also says
     ``method``.
     """
@@ -170,8 +226,9 @@ def evaluate_runs(y_true, y_preds, labels=None, n_boot: int = 1000, resamples=No
     bal = np.array([r["balanced_accuracy"] for r in runs])
     per_class = {}
     for i, lab in enumerate(labels):
-        prec = mean([r["precision"][lab] for r in runs])
-        per_class[lab] = {"precision": 0.0 if prec is None else prec,
+        precisions = [r["precision"][lab] for r in runs]
+        per_class[lab] = {"precision": mean(precisions),  # over the runs that predict the class (None: none)
+                          "precision_runs": sum(v is not None for v in precisions),
                           "recall": mean([r["recall"][lab] for r in runs]) if support[i] else None,
                           "n": int(support[i])}
     out = {"accuracy": float(np.mean([r["accuracy"] for r in runs])), "balanced_accuracy": float(bal.mean()),
@@ -183,7 +240,7 @@ def evaluate_runs(y_true, y_preds, labels=None, n_boot: int = 1000, resamples=No
     if not n_boot:
         return out
     if resamples is None:
-        resamples = resample_indices(n, n_boot, random_state)
+        resamples = resample_indices(n, n_boot, random_state, clusters, None if clusters is None else t)
     resamples = np.asarray(resamples)
     if resamples.ndim != 2 or resamples.shape[1] != n:
         raise ValueError(f"resamples must be (n_boot, {n}) indices, got shape {resamples.shape}")
@@ -199,8 +256,8 @@ def evaluate_runs(y_true, y_preds, labels=None, n_boot: int = 1000, resamples=No
         acc_b.append(a), bal_b.append(bb), prec_b.append(pr), rec_b.append(rc)
     pr, rc = np.concatenate(prec_b), np.concatenate(rec_b)
     out["ci"] = {"level": LEVEL, "n_boot": int(len(resamples)),
-                 "method": "percentile bootstrap over the test items, one training run picked at random per "
-                           f"resample ({s} run(s))",
+                 "method": f"{bootstrap_method(clusters, t)}, one training run picked at random per resample "
+                           f"({s} run(s))",
                  "accuracy": _interval(np.concatenate(acc_b)),
                  "balanced_accuracy": _interval(np.concatenate(bal_b)),
                  "per_class": {lab: {"precision": _interval(pr[:, i]), "recall": _interval(rc[:, i])}
@@ -234,6 +291,35 @@ def paired_difference(point_a, point_b, scores_a: np.ndarray, scores_b: np.ndarr
     return {"difference": float(np.mean(point_a) - np.mean(point_b)), "ci": _interval(d)}
 
 
+def degenerate(m: dict, classes=None) -> dict:
+    """The degenerate rule on metrics of :func:`evaluate` or :func:`evaluate_runs`:
+    ``degenerate`` when a class of ``classes`` (default: the labels) is recognised by
+    no training run (recall 0 in every run); ``zero_recall`` those classes,
+    ``never_predicted`` the classes no run predicts, ``degenerate_runs`` {class: runs
+    with recall 0} for the classes only some runs miss, ``n_runs``."""
+    labels = list(m["labels"])
+    classes = labels if classes is None else list(classes)
+    cm = np.asarray(m["confusion_matrix"])
+    never = [labels[j] for j in range(len(labels)) if cm[:, j].sum() == 0]
+    zero = [c for c in classes if (m["per_class"].get(c) or {}).get("recall") == 0.0]
+    runs = m.get("runs") or []
+    partly = {c: sum(1 for r in runs if (r["recall"] or {}).get(c) == 0.0) for c in classes if c not in zero}
+    return {"degenerate": bool(zero), "zero_recall": zero, "never_predicted": never,
+            "degenerate_runs": {c: k for c, k in partly.items() if k}, "n_runs": len(runs) or 1}
+
+
+def degenerate_words(v: dict) -> list[str]:
+    """:func:`degenerate`'s verdict in words: ['degenerate: recognises no HELI (never
+    predicts HELI)'] and/or ['recognises no QUAD in 1 of 3 runs']; [] when none."""
+    parts = []
+    if v["degenerate"]:
+        never = [c for c in v["never_predicted"] if c in v["zero_recall"]]
+        parts.append(f"degenerate: recognises no {', '.join(v['zero_recall'])}"
+                     + (f" (never predicts {', '.join(never)})" if never else ""))
+    parts += [f"recognises no {c} in {k} of {v['n_runs']} runs" for c, k in v.get("degenerate_runs", {}).items()]
+    return parts
+
+
 def format_metrics(m: dict) -> str:
     """A short human-readable report of :func:`evaluate`'s dict."""
     ci = m.get("ci") or {}
@@ -252,7 +338,7 @@ def format_metrics(m: dict) -> str:
     undefined = False
     for j, (lab, pc) in enumerate(m["per_class"].items()):
         cc = ci.get("per_class", {}).get(lab, {})
-        never = m["labels"][j] == lab and predicted[j] == 0
+        never = pc.get("precision") is None or (m["labels"][j] == lab and predicted[j] == 0)
         undefined |= bool(never)
         precision = "     –" if never else fmt(pc["precision"], cc.get("precision"))
         lines.append(f"  {lab:>8s} n={pc['n']:<5d} recall {fmt(pc['recall'], cc.get('recall'))}"
@@ -264,6 +350,9 @@ def format_metrics(m: dict) -> str:
         lines.append(f"  {lab:>{width}s} " + " ".join(f"{v:>{max(width, 6)}d}" for v in row))
     if undefined:
         lines.append("precision – = undefined: the class is never predicted")
+    words = degenerate_words(degenerate(m))
+    if words:
+        lines.append("verdict: " + "; ".join(words))
     if ci:
         lines.append(f"[..] = {ci['level']:.0%} bootstrap intervals ({ci['n_boot']} resamples)")
     return "\n".join(lines)

@@ -44,7 +44,7 @@ def _weights(model: ProfileClassifier) -> tuple[str, bytes]:
         import torch
 
         buf = io.BytesIO()
-        torch.save({k: v.contiguous() for k, v in model.net_.state_dict().items()}, buf)
+        torch.save({k: v.detach().cpu().contiguous() for k, v in model.net_.state_dict().items()}, buf)
         return "model.pt", buf.getvalue()
     raise ValueError(f"cannot save a model of kind {model.name!r}")
 

@@ -73,7 +73,8 @@ def choose(scores: dict, prefer: str = "smaller", tie: float = TIE) -> tuple:
 class SweepJob:
     """One sigma_P point (or one value of another setting: the study's candidates):
     everything a worker needs (picklable when make_train is). ``boot_seed``: the
-    bootstrap's seed (None: ``child_seed(train_seed, 7)``)."""
+    bootstrap's seed (None: ``child_seed(train_seed, 7)``). ``test_sets``: {name: (X, y)
+    or (X, y, drone of each item)}: with drones, the intervals resample drones first."""
 
     index: int
     sigma_p: float
@@ -95,11 +96,12 @@ def run_sweep_job(job: SweepJob, on_cell=None) -> list[dict]:
     for name in job.models:
         model = make_classifier(name, random_state=job.model_seeds[name], **job.model_params.get(name, {}))
         model.fit(x, y)
-        for test_name, (xt, yt) in job.test_sets.items():
+        for test_name, (xt, yt, *drones) in job.test_sets.items():  # (X, y) or (X, y, drone of each item)
             yt = model.check_labels(yt, source=f"test set {test_name}")
             model.check_input(xt, source=f"test set {test_name}")
             m = evaluate(yt, model.predict(xt), labels=model.classes_.tolist(), n_boot=job.n_boot,
-                         random_state=child_seed(job.train_seed, 7) if job.boot_seed is None else job.boot_seed)
+                         random_state=child_seed(job.train_seed, 7) if job.boot_seed is None else job.boot_seed,
+                         clusters=drones[0] if drones and drones[0] is not None else None)
             recalls = {lab: pc["recall"] for lab, pc in m["per_class"].items() if pc["recall"] is not None}
             ci = m["ci"] or {}
             row = {"sigma_p": job.sigma_p, "model": name, "test_set": test_name,
@@ -125,7 +127,8 @@ def row_ci(row: dict, metric: str = "balanced") -> list | None:
 
 def _job_key(job: SweepJob) -> str:
     tests = {k: [np.asarray(v[0]).shape, cache_key(arrays=[v[0]], algorithm="sha1", length=None),
-                 cache_key(text="|".join(np.asarray(v[1]).astype(str).tolist()), algorithm="sha1", length=None)]
+                 *(cache_key(text="|".join(np.asarray(a).astype(str).tolist()), algorithm="sha1", length=None)
+                   for a in v[1:] if a is not None)]  # the labels (and the drones, when given)
              for k, v in job.test_sets.items()}
     desc = {"sigma_p": job.sigma_p, "seed": job.train_seed, "models": list(job.models),
             "params": job.model_params, "tests": tests, "n_boot": job.n_boot,

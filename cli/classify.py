@@ -9,7 +9,7 @@ from pathlib import Path
 from .common import (SECONDS_CNN_PROFILE, SECONDS_RESAMPLE, SECONDS_TREE_BIN, SECONDS_TSAUG, add_verb, check_size,
                      check_training_memory, count_2, info, load_profile_file, nonneg_int, nothing_written, path_list,
                      positive_int, result, seed_int)
-from .options import add_classifier_options, model_params
+from .options import add_classifier_options, add_device_option, model_params
 
 CNN_BINS = 400  # the CNN's 1 x 20 x 20 input
 
@@ -60,7 +60,25 @@ def run_train(args) -> int:
         s = model.split_scores_
         result(f"best epoch {s['best_epoch']}/{s['epochs_run']}: validation accuracy {s['val_accuracy']:.3f}; "
                f"held-out 10% split ({s['n_test']} profiles) accuracy {s['test_accuracy']:.3f}")
+    result(training_verdict(model, data))
     return 0
+
+
+def training_verdict(model, data, what: str = "its training profiles", per_class: int = 1000) -> str:
+    """The degenerate rule (:func:`mdaug.classify.metrics.degenerate`, the study's) on up
+    to ``per_class`` profiles of each class of ``data`` (evenly spaced), as one line."""
+    import numpy as np
+
+    from ..classify.metrics import degenerate, degenerate_words, evaluate
+
+    labels = np.asarray(data.labels).astype(str)
+    idx = np.concatenate([rows[np.linspace(0, rows.size - 1, min(per_class, rows.size)).astype(int)]
+                          for rows in (np.flatnonzero(labels == c) for c in data.classes)])
+    m = evaluate(labels[idx], model.predict(data.profiles[idx]), labels=model.classes_.tolist(), n_boot=0)
+    words = degenerate_words(degenerate(m))
+    recalls = ", ".join(f"{c} {pc['recall']:.3f}" for c, pc in m["per_class"].items() if pc["recall"] is not None)
+    return (f"verdict on {idx.size} of {what}: "
+            + ("; ".join(words) if words else "not degenerate") + f" (recall {recalls})")
 
 
 def add_train(sub, parents, help):
@@ -89,6 +107,11 @@ def run_evaluate(args) -> int:
     check_paths(inputs=[("MODEL", args.model), ("TEST", args.test)],
                 outputs=[Output("--json", args.json, "json"), Output("--plot", args.plot, "plot")])
     model = load_model(args.model)
+    if model.name == "cnn":
+        from ..classify.cnn import resolve_device
+
+        resolve_device(args.device)  # 'cuda' without a GPU: refused before any work
+        model.device = args.device
     test = load_profile_file(args.test)
     x, y = _check_test(model, test, args.test)
     check_boot_size(args.n_boot, len(y))
@@ -120,6 +143,7 @@ def add_evaluate(sub, parents, help):
     p.add_argument("--n-boot", type=nonneg_int, default=1000, metavar="N",
                    help="bootstrap resamples of the intervals, 0 = no intervals (default: %(default)s)")
     p.add_argument("--seed", type=seed_int, default=0, help="bootstrap seed (default: %(default)s)")
+    add_device_option(p)
     p.set_defaults(func=run_evaluate)
     return p
 
@@ -204,6 +228,7 @@ def run_baseline(args) -> int:
         n_aug = args.n_per_class * len(data.classes)
         result(f"trained the tsaug-baseline CNN on {n_aug:,} tsaug-augmented profiles ({args.n_per_class:,} per "
                f"class) made from the {len(data)} measured profiles of {args.data}; wrote {args.out}")
+        result(training_verdict(model, data, f"the measured profiles of {args.data}"))
         for path, test in tests.items():
             x, y = _check_test(model, test, path)
             report[str(path)] = evaluate(y, model.predict(x), labels=model.classes_.tolist(), random_state=args.seed)

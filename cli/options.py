@@ -133,6 +133,7 @@ def add_classifier_options(p, *, epochs_default: int = 50, normalisation: bool =
     g.add_argument("--patience", type=positive_int, default=None, metavar="EPOCHS",
                    help="CNN early stopping after this many epochs without a better validation loss "
                         "(default: none, train every epoch)")
+    add_device_option(g)
     if cnn_only:
         return
     g.add_argument("--kernel", default="rbf", choices=("rbf", "linear", "poly", "sigmoid"),
@@ -141,11 +142,20 @@ def add_classifier_options(p, *, epochs_default: int = 50, normalisation: bool =
                    help="XGBoost trees (default: %(default)s)")
 
 
+def add_device_option(p) -> None:
+    """``--device``: where the torch steps (the CNN's training and predictions) run."""
+    from ..classify.base import DEVICES
+
+    p.add_argument("--device", choices=DEVICES, default="auto",
+                   help="where the CNN trains and predicts: auto = a CUDA GPU when torch sees one, else the CPU "
+                        "(default: %(default)s)")
+
+
 def model_params(args, name: str) -> dict:
     """Classifier parameters from the command line (only those that apply to ``name``)."""
     p = {"normalisation": args.normalisation, "threads": args.threads}
     if name == "cnn":
-        p.update(epochs=args.epochs, batch_size=args.batch_size, patience=args.patience)
+        p.update(epochs=args.epochs, batch_size=args.batch_size, patience=args.patience, device=args.device)
     elif name == "svm":
         p.update(kernel=args.kernel)
     elif name == "xgb":

@@ -94,7 +94,8 @@ def invocation(args) -> str:
 
     parts = ["mdaug", "run"]
     for opt, value in (("--config", args.config), ("--out", args.out), ("--ramps", args.ramps),
-                       ("--seed", args.seed), ("--workers", args.workers), ("--scheduler", args.scheduler)):
+                       ("--seed", args.seed), ("--workers", args.workers), ("--scheduler", args.scheduler),
+                       ("--device", None if args.device == "auto" else args.device)):
         if value is not None:
             parts += [opt, str(value)]
     if args.quick:
@@ -122,6 +123,11 @@ def run_study(args) -> int:
         cfg.workers = args.workers
     if args.scheduler:
         cfg.scheduler = args.scheduler
+    if args.device != "auto":
+        from ..classify.cnn import resolve_device
+
+        resolve_device(args.device)  # 'cuda' without a GPU: refused before the folder exists
+        cfg.device = args.device
     if args.quick:
         cfg = cfg.quick_version()
     if args.ramps is not None:
@@ -188,6 +194,9 @@ def add_run(sub, parents, help):
                         "CNNs (default: the config's, 2; the results do not depend on it)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="dask.distributed scheduler address, or 'local' to start a LocalCluster (default: none)")
+    from .options import add_device_option
+
+    add_device_option(p)
     p.set_defaults(func=run_study)
     return p
 

@@ -89,7 +89,8 @@ def run_sweep(args) -> int:
         name = SELECT if path is args.select else path.stem
         if name in tests:
             raise ValueError(f"--test: two test files share the name {name!r}; rename one")
-        tests[name] = (ps.profiles, ps.labels)
+        # the drone of each acquisition, when the file says: the intervals resample drones first
+        tests[name] = (ps.profiles, ps.labels, *([ps.extra["specimen"]] if "specimen" in ps.extra else []))
     acq, perturb = acquisition_from_args(args)
     check_sweep_sizes(args, acq, sum(len(v[1]) for v in tests.values()))
     make_train = SyntheticTrainSet(tuple(args.classes), args.n_per_class, acquisition=acq.to_dict(),

@@ -17,6 +17,7 @@ import os
 import sys
 
 QUIET_ENV = "MDAUG_QUIET"
+NO_BARS_ENV = "MDAUG_NO_BARS"  # set in worker processes: no bars, status lines as in the parent
 _TRUE = ("1", "true", "yes", "on")
 
 
@@ -35,8 +36,17 @@ def set_quiet(quiet: bool = True) -> bool:
 
 def quiet_worker() -> None:
     """Initializer of worker processes: their bars would garble the parent's on the
-    same terminal, so workers draw none (the parent shows the jobs' progress)."""
-    set_quiet(True)
+    same terminal, so workers draw none (the parent shows the jobs' progress). Their
+    status lines (a job's start and end) print as the parent's do: silenced only by
+    quiet, which the workers inherit."""
+    os.environ[NO_BARS_ENV] = "1"
+
+
+def in_worker() -> bool:
+    """Whether this process is a worker of another (a process pool's or dask's)."""
+    import multiprocessing
+
+    return multiprocessing.parent_process() is not None or os.environ.get(NO_BARS_ENV) == "1"
 
 
 def _isatty(stream) -> bool:
@@ -49,7 +59,7 @@ def _isatty(stream) -> bool:
 def progress_enabled(progress: bool | None = None, stream=None) -> bool:
     """Whether to draw a bar: ``progress`` None = stderr is a terminal, True = always,
     False = never; quiet wins over all three."""
-    if is_quiet() or progress is False:
+    if is_quiet() or progress is False or os.environ.get(NO_BARS_ENV) == "1":
         return False
     if progress is True:
         return True

@@ -104,12 +104,19 @@ class StageCache:
         """Whether stage ``name`` is cached for ``key`` (with the keys ``needs``)."""
         return self._stored(name, key, needs) is not None
 
-    def store(self, name: str, key: str, result, seconds: float):
-        """Record a stage computed elsewhere (e.g. by a worker) with its wall time."""
+    def started(self, name: str, where: str = " (sent to the workers)") -> None:
+        """Log that stage ``name`` starts (computed elsewhere: :meth:`store` logs its end;
+        the worker logs when it takes the job up)."""
+        self.log(f"[{name}] running{where} ...")
+        self._notify("stage_started", name)
+
+    def store(self, name: str, key: str, result, seconds: float, where: str = " in a worker"):
+        """Record a stage computed elsewhere (e.g. by a worker) with its wall time; log its end."""
         self.timings[name] = seconds
         self.stored.add(name)
         text = json.dumps({"key": key, "seconds": seconds, "result": self._to_record(result)}, indent=1)
         atomic_write(self.path(name), lambda fh: fh.write(text.encode()))
+        self.log(f"[{name}] done in {seconds:.1f} s{where}")
         self._notify("stage_finished", name, seconds, False)
         return result
 
@@ -128,11 +135,7 @@ class StageCache:
             self.log(f"[{name}] cached ({stored['seconds']:.1f} s when computed)")
             self._notify("stage_finished", name, stored["seconds"], True)
             return stored["result"]
-        self.log(f"[{name}] running ...")
-        self._notify("stage_started", name)
+        self.started(name, "")
         t0 = time.perf_counter()
         result = compute()
-        seconds = time.perf_counter() - t0
-        self.store(name, key, result, seconds)
-        self.log(f"[{name}] done in {seconds:.1f} s")
-        return result
+        return self.store(name, key, result, time.perf_counter() - t0, "")

@@ -109,6 +109,7 @@ class StudyConfig:
     quick: bool = False
     workers: int = 2                # local worker processes (the classes' calibrations, the strategies' CNNs)
     scheduler: str | None = None
+    device: str = "auto"            # where the CNNs train and predict: auto (a GPU when present), cpu, cuda
     data: DataConfig = field(default_factory=DataConfig)
     simulation: SimulationConfig = field(default_factory=SimulationConfig)
     protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
@@ -144,6 +145,10 @@ class StudyConfig:
             raise ValueError(f"{src}: seed = {self.seed}: expected an integer >= 0")
         if self.workers < 1:
             raise ValueError(f"{src}: workers = {self.workers}: expected an integer >= 1")
+        from ..classify.base import DEVICES
+
+        if self.device not in DEVICES:
+            raise ValueError(f"{src}: device = {self.device!r}: expected one of {list(DEVICES)}")
         if self.scheduler is not None and not self.scheduler.strip():
             raise ValueError(f"{src}: scheduler is empty: expected an address (host:port) or 'local'")
         if not self.classes or len(set(self.classes)) != len(self.classes):

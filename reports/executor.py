@@ -1,8 +1,10 @@
 """One executor interface for the study's independent jobs.
 
-``executor.map(fn, items)`` returns results in order. ``fn`` must be a picklable
-top-level function and each item carries its own seed, so results do not depend on
-which executor ran them.
+``executor.map(fn, items)`` yields results in order, each as soon as it and those
+before it are done (so the study logs each stage's end when it ends, not when the
+last job does). ``fn`` must be a picklable top-level function and each item carries
+its own seed, so results do not depend on which executor ran them. Workers draw no
+bars; each job logs its own start and end there (:func:`mdaug.reports.jobs.announced`).
 
 * :class:`SerialExecutor`: in this process (the default with one worker);
 * :class:`ProcessExecutor`: local processes (concurrent.futures);
@@ -41,8 +43,11 @@ class ProcessExecutor:
         if self._pool is None:
             self._pool = ProcessPoolExecutor(max_workers=self.workers, initializer=worker_init,
                                              initargs=(os.getpid(),))
+        return self._results(self._pool.map(fn, items))  # an iterator: results in order, as they come
+
+    def _results(self, results):
         try:
-            return list(self._pool.map(fn, items))
+            yield from results
         except BaseException:
             self.stop()
             raise
@@ -76,8 +81,12 @@ class DaskExecutor:
 
     def map(self, fn, items):
         futures = self.client.map(fn, list(items), pure=False)
+        return self._results(futures)  # in order, as they come
+
+    def _results(self, futures):
         try:
-            return self.client.gather(futures)
+            for f in futures:
+                yield f.result()
         except BaseException:  # interrupted: nothing more of these jobs runs
             import contextlib
 

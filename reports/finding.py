@@ -169,8 +169,9 @@ def context(results: dict, w=Html(), j: dict | None = None) -> str:
     text = (f"{what} Acquisition: {w.esc(results['acquisition_text'])}. Seed {cfg['seed']}"
             f"{', quick sizes' if cfg.get('quick') else ''}; run as <code>{w.esc(results.get('invocation') or command(results))}"
             f"</code>. Each CNN is trained {runs} times (seeds); its figure is the mean over the runs and its 95% "
-            "interval covers the test sample and the training runs (a bootstrap of the test acquisitions, one run "
-            "picked at random in each resample: where one training run scores on a test sample like this one).")
+            "interval covers the test sample and the training runs (a bootstrap of the test set's drones, where "
+            "it says which drone made each acquisition, and then their acquisitions, one run picked at random in "
+            "each resample: where one training run scores on a test sample like this one).")
     bad = [c for c, cal in results["calibration"].items() if not cal["converged"]]
     if bad:
         text += (f" {w.warn(f'Calibration of {join(bad)} did not converge')} (its chain is shorter "

@@ -8,6 +8,8 @@ set comes from :func:`mdaug.strategies.training_set`, the registry's one builder
 from __future__ import annotations
 
 import dataclasses
+import functools
+import os
 import time
 from dataclasses import dataclass
 
@@ -16,12 +18,34 @@ import numpy as np
 from ..strategies import STRATEGIES, TrainingSpec, training_set
 
 
+def announced(label):
+    """Decorator of a job function: in a worker process, a status line when the job
+    starts and when it ends (``label(job)`` names it, as the study's stage log does);
+    in the study's own process the stage cache logs the stage instead."""
+    def wrap(fn):
+        @functools.wraps(fn)
+        def run(job):
+            from ..radar.progress import echo, in_worker
+
+            if not in_worker():
+                return fn(job)
+            name = label(job)
+            echo(f"[{name}] started in worker {os.getpid()}")
+            t0 = time.perf_counter()
+            out = fn(job)
+            echo(f"[{name}] done in {time.perf_counter() - t0:.1f} s in worker {os.getpid()}")
+            return out
+        return run
+    return wrap
+
+
 def _threads(n: int = 1) -> None:
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(n)
 
 
+@announced(lambda job: f"calibrate_{job['cls']}")
 def calibrate_class(job: dict) -> dict:
     """One class calibrated from its measurements (``profiles``, of the drones
     ``drones``) under ``acquisition``: each drone on its own (the first drone's posterior
@@ -95,6 +119,7 @@ def _estimator_sbc(res) -> dict | None:
                                  "n_replicates": sbc.get("n_replicates")}
 
 
+@announced(lambda job: f"ceiling: {job['model']} (seed {job['seed']})")
 def fit_predict(job: dict) -> dict:
     """Train one classifier (``model``, ``seed``, ``params``) on (``X``, ``y``) and predict
     every set of ``tests``: {train_seconds, predictions (encoded)}."""
@@ -127,6 +152,8 @@ class StrategySets:
         return X, y
 
 
+@announced(lambda job: f"candidates: {job['spec'].strategy}"
+                      + ("" if job["spec"].setting is None else f" at {job['spec'].setting:g}"))
 def candidate(job: dict) -> list[dict]:
     """One choice candidate (a strategy at one sigma_P or width): the sweep's job
     (:func:`mdaug.classify.protocol.run_sweep_job`: its training set, the fast
@@ -145,6 +172,7 @@ def candidate(job: dict) -> list[dict]:
     return run_sweep_job(sweep)
 
 
+@announced(lambda job: f"cnn_{job['name']}")
 def train_and_test(job: dict) -> dict:
     """A strategy's training runs: make its training set once (from ``seed``), train one
     classifier per run seed (``run_seeds``: weights, validation split and shuffles) on
@@ -152,6 +180,7 @@ def train_and_test(job: dict) -> dict:
     indices per run and set, :func:`mdaug.reports.statistics.encode`), not their scores:
     the study scores all runs of all classifiers on the same resamples."""
     from ..classify import make_classifier, save_model
+    from ..radar.progress import echo
     from .statistics import encode
 
     _threads(job.get("threads", 1))
@@ -160,7 +189,10 @@ def train_and_test(job: dict) -> dict:
     t_data = time.perf_counter() - t0
     classes = sorted(job["classes"])
     runs = []
-    for i, seed in enumerate(job.get("run_seeds") or [job["seed"]]):
+    seeds = job.get("run_seeds") or [job["seed"]]
+    echo(f"[cnn_{job.get('name', job['model'])}] training set of {len(y)} profiles in {t_data:.1f} s; "
+         f"{len(seeds)} training run(s)")
+    for i, seed in enumerate(seeds):
         clf = make_classifier(job["model"], random_state=seed, **dict(job.get("model_params", {})))
         t1 = time.perf_counter()
         clf.fit(X, y, **({} if groups is None else {"groups": groups}))
@@ -171,6 +203,7 @@ def train_and_test(job: dict) -> dict:
                      "epochs_run": (getattr(clf, "split_scores_", None) or {}).get("epochs_run"),
                      "predictions": {name: encode(clf.predict(np.asarray(Xt)), classes)
                                      for name, (Xt, _) in job["tests"].items()}})
+        echo(f"[cnn_{job.get('name', job['model'])}] run {i + 1}/{len(seeds)} trained in {t_train:.1f} s")
     spec = job["spec"].to_dict()
     return {"strategy": job["name"], "model": job["model"], "spec": spec, "sigma_p": spec.get("sigma_p"),
             "width": spec.get("width"), "seeds": [r["seed"] for r in runs], "n_train": int(len(y)),

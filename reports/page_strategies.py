@@ -56,11 +56,15 @@ def metric_cells(w: Html, base: str, m: dict, classes, precision: bool = True, r
             pc = m["per_class"].get(c) or {}
             cc = (ci.get("per_class") or {}).get(c) or {}
             j = labels.index(c) if c in labels else None
-            if j is None or cm[:, j].sum() == 0:  # never predicted: precision undefined
+            if j is None or cm[:, j].sum() == 0 or pc.get("precision") is None:  # never predicted: undefined
                 cells.append(td("–"))
-            else:
-                cells.append(td(w.val_ci(f"{base}.per_class.{c}.precision", pc.get("precision"),
-                                         f"{base}.ci.per_class.{c}.precision", cc.get("precision"), br=True)))
+                continue
+            cell = w.val_ci(f"{base}.per_class.{c}.precision", pc.get("precision"),
+                            f"{base}.ci.per_class.{c}.precision", cc.get("precision"), br=True)
+            defined, runs_ = pc.get("precision_runs"), m.get("n_runs") or 1
+            if defined is not None and defined < runs_:  # the mean is over the runs that predict the class
+                cell += f"<br><span class='ci'>over the {defined} of {runs_} runs that predict {c}</span>"
+            cells.append(td(cell))
     return cells
 
 
@@ -121,12 +125,15 @@ def ceiling_line(r: dict, j: dict, test: str):
 
 
 NOTE = ("<p class='note'>Each figure is the mean over the CNN's training runs (seeds). Intervals: 95%, covering "
-        "the test sample and the training runs (a bootstrap of the test acquisitions, one run picked at random "
+        "the test sample and the training runs (a bootstrap of the test set's drones, where the set says which "
+        "drone made each acquisition, and then their acquisitions; one run picked at random "
         "in each resample: where one training run scores on a test sample like this one; it holds every run's own "
         "score). The same resamples and picks serve every strategy and the ceiling, so their differences "
         "(the finding) are paired. Recall of a class is the share of its acquisitions classified correctly (the "
         "published per-class 'precision'); precision is the share of the acquisitions predicted as the class "
-        "that are of it (a dash: no run ever predicts the class, precision is undefined). Verdicts: "
+        "that are of it (a dash: no run ever predicts the class, precision is undefined; a mean over fewer runs "
+        "than the others says over how many: the runs that never predict the class are left out, not counted "
+        "as 0). Verdicts: "
         "<i>degenerate</i>, a class no run recognises; <i>biased</i>, class recalls whose intervals do not "
         "overlap; <i>not better than chance</i>, a balanced-accuracy interval that contains 0.5; <i>worse than "
         "chance</i>, one below 0.5.</p>")

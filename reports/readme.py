@@ -36,7 +36,7 @@ from .verdicts import judge, label
 BEGIN = "<!-- results:begin -->"
 END = "<!-- results:end -->"
 README = Path(__file__).resolve().parents[1] / "README.md"
-IGNORED = ("workers", "scheduler")  # how the run was executed, not what it computed
+IGNORED = ("workers", "scheduler", "device")  # how the run was executed, not what it computed
 
 
 def load_results(path) -> dict:

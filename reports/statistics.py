@@ -1,8 +1,11 @@
 """The study's statistics: every classifier scored on the same resamples.
 
-Each test set gets one set of bootstrap resamples of its acquisitions and one set of
-training-run picks, both from the study's seed and the set's name
-(:func:`resamples`). Every strategy's CNN (several training runs: seeds) and every
+Each test set gets one set of bootstrap resamples and one set of training-run picks,
+both from the study's seed and the set's name (:func:`resamples`). Where the set says
+which drone made each acquisition (``truth[set]["drones"]``), a resample draws drones
+(clusters) with replacement within each class and then acquisitions within them, so
+the intervals cover other drones, not only other acquisitions of these few; otherwise
+it resamples the acquisitions. Every strategy's CNN (several training runs: seeds) and every
 ceiling model is scored on those same resamples, so that
 
 * a classifier's figure is the mean over its runs and its 95% interval covers the
@@ -41,15 +44,29 @@ def decode(text: str, classes) -> np.ndarray:
     return classes[np.frombuffer(text.encode(), dtype=np.uint8) - ord("0")]
 
 
-def truth(y, classes) -> dict:
-    """A test set's true labels as stored in results.json."""
-    return {"classes": list(classes), "y": encode(y, classes)}
+def truth(y, classes, drones=None) -> dict:
+    """A test set's true labels as stored in results.json, and the drone of each
+    acquisition (``drones``: ids within its class, None when the set does not say) as
+    ``"CLASS/id"``: the clusters of the bootstrap."""
+    out = {"classes": list(classes), "y": encode(y, classes)}
+    if drones is not None:
+        if len(drones) != len(y):
+            raise ValueError(f"drones has {len(drones)} entries for {len(y)} acquisitions")
+        out["drones"] = [f"{c}/{d}" for c, d in zip(np.asarray(y).astype(str), np.asarray(drones).astype(str))]
+    return out
 
 
-def resamples(seed: int, set_name: str, n: int, n_boot: int):
+def clusters(truth_set: dict):
+    """The drone of each acquisition of a stored set (None: not known, each its own)."""
+    return truth_set.get("drones")
+
+
+def resamples(seed: int, set_name: str, n: int, n_boot: int, drones=None, y=None):
     """(indices (n_boot, n), run picks (n_boot, MAX_RUNS)) of test set ``set_name``: the
-    same for every classifier scored on it."""
-    idx = resample_indices(n, n_boot, child_seed(seed, "bootstrap", set_name))
+    same for every classifier scored on it. With ``drones`` (and the true classes ``y``)
+    the resamples are two-stage: drones, then acquisitions within them
+    (:func:`mdaug.classify.metrics.resample_indices`)."""
+    idx = resample_indices(n, n_boot, child_seed(seed, "bootstrap", set_name), drones, y)
     picks = seed_uniforms(n_boot, MAX_RUNS, child_seed(seed, "bootstrap-runs", set_name))
     return idx, picks
 
@@ -60,11 +77,13 @@ def score(truth_set: dict, predictions: list[str], set_name: str, seed: int, n_b
     classes = truth_set["classes"]
     y = decode(truth_set["y"], classes)
     preds = np.stack([decode(p, classes) for p in predictions])
+    drones = clusters(truth_set)
     if n_boot:
-        idx, picks = resamples(seed, set_name, len(y), n_boot)
+        idx, picks = resamples(seed, set_name, len(y), n_boot, drones, y)
     else:
         idx, picks = None, None
-    return evaluate_runs(y, preds, labels=classes, n_boot=n_boot, resamples=idx, uniforms=picks, seeds=seeds)
+    return evaluate_runs(y, preds, labels=classes, n_boot=n_boot, resamples=idx, uniforms=picks, seeds=seeds,
+                         clusters=drones)
 
 
 def differences(truth_set: dict, entries: dict, set_name: str, seed: int, n_boot: int) -> dict:
@@ -75,7 +94,7 @@ def differences(truth_set: dict, entries: dict, set_name: str, seed: int, n_boot
     y = decode(truth_set["y"], classes)
     if not n_boot or not entries:
         return {}
-    idx, picks = resamples(seed, set_name, len(y), n_boot)
+    idx, picks = resamples(seed, set_name, len(y), n_boot, clusters(truth_set), y)
     point, boot = {}, {}
     for name, preds in entries.items():
         p = np.stack([decode(x, classes) for x in preds])

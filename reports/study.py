@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..radar import atomic_savez, atomic_write, load_profiles
+from ..radar import atomic_savez, load_profiles
 from ..radar.seeds import child_seed
 from ..strategies import STRATEGIES, TrainingSpec, training_set
 from . import jobs, statistics, verdicts
@@ -46,6 +46,7 @@ from .cache import StageCache, settings_key
 from .config import StudyConfig
 from .executor import make_executor
 from .identity import check_study_folder, claim, study_key
+from .results_file import write_results
 from .study_training import TrainingStages, chosen_spec
 
 
@@ -114,7 +115,7 @@ class Study(TrainingStages):
             sets["select"] = (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
         for name, path in self.cfg.data.test.items():
             ps = load_profiles(path)
-            sets[name] = (ps.profiles, ps.labels)
+            sets[name] = (ps.profiles, ps.labels, *([ps.extra["specimen"]] if "specimen" in ps.extra else []))
             acqs.append((path, acquisition_from_file(ps.extra, path)))
         stated = [(p, a) for p, a in acqs if a is not None]
         k = self.cfg.protocol.acquisition_ramps
@@ -149,11 +150,11 @@ class Study(TrainingStages):
             select[cls] = (camp.profiles[rest], camp.labels[rest], camp.specimen[rest])
             n = sim.n_new.get(cls, 44)
             camp = simulate_campaign(cls, sim.new_specimens, n, _stage_seed(self.cfg, "new", cls), scene=scene)
-            new[cls] = (camp.profiles, camp.labels)
+            new[cls] = (camp.profiles, camp.labels, camp.specimen)
             if sim.large_factor > 1:
                 camp = simulate_campaign(cls, 2 * sim.new_specimens, n * sim.large_factor,
                                          _stage_seed(self.cfg, "new_large", cls), scene=scene)
-                large[cls] = (camp.profiles, camp.labels)
+                large[cls] = (camp.profiles, camp.labels, camp.specimen)
 
         def cat(parts):
             return tuple(np.concatenate([p[i] for p in parts.values()]) for i in range(len(next(iter(parts.values())))))
@@ -166,6 +167,13 @@ class Study(TrainingStages):
     def load_set(self, name: str):
         ps = load_profiles(self.out / "data" / f"{name}.npz")
         return ps.profiles, ps.labels
+
+    def set_drones(self, name: str):
+        """The drone id (within its class) of each acquisition of a stored set, None when
+        the set does not say (the bootstrap's clusters, :mod:`.statistics`)."""
+        path = self.out / "data" / f"{name}.npz"
+        extra = load_profiles(path).extra if path.is_file() else {}
+        return np.asarray(extra["specimen"]).astype(str) if "specimen" in extra else None
 
     def load_drones(self, name: str, cls: str) -> np.ndarray:
         """The drone id of each profile of class ``cls`` in a stored set ("0" when unknown)."""
@@ -228,6 +236,8 @@ class Study(TrainingStages):
                 if not self.cache.has(f"calibrate_{c}", settings_key(self.calib_key, c), CALIBRATION_NEEDS)]
         if len(todo) > 1 and self.cfg.workers > 1:
             work = [self._calibration_job(c, acquisition) for c in todo]
+            for c in todo:
+                self.cache.started(f"calibrate_{c}")
             for c, res in zip(todo, executor.map(jobs.calibrate_class, work)):
                 self.cache.store(f"calibrate_{c}", settings_key(self.calib_key, c), _jsonable(res), res["seconds"])
         return {c: self.calibrate(c, acquisition) for c in self.cfg.classes}
@@ -256,7 +266,7 @@ class Study(TrainingStages):
     def candidates(self, specs: dict, select, tests: dict, executor) -> dict:
         p = self.cfg.protocol
         sel_name, sel_data, _ = select
-        sets = {sel_name: sel_data, **tests}
+        sets = {n: (*xy, self.set_drones(n)) for n, xy in {sel_name: sel_data, **tests}.items()}
 
         def compute():
             todo = [(name, i, s) for name, ss in specs.items() if STRATEGIES[name].parameter is not None
@@ -339,8 +349,8 @@ class Study(TrainingStages):
         finally:
             executor.close()
         classes = list(self.cfg.classes)
-        truth = {sel_name: statistics.truth(select[1][1], sorted(classes)),
-                 **{n: statistics.truth(yt, sorted(classes)) for n, (_, yt) in tests.items()}}
+        truth = {n: statistics.truth(yt, sorted(classes), self.set_drones(n))
+                 for n, (_, yt) in {sel_name: select[1], **tests}.items()}
         results = {
             "config": self.cfg.to_dict(), "invocation": self.invocation, "simulated": self.cfg.simulated,
             "data": index["sets"], "acquisition": index["acquisition"], "acquisition_text": acq.describe(),
@@ -356,8 +366,7 @@ class Study(TrainingStages):
         if ceiling is not None:
             results["ceiling"]["chosen"] = verdicts.ceiling_choice(results["ceiling"]["models"], sel_name)
         results["verdicts"] = verdicts.judge(results)
-        text = json.dumps(_jsonable(results), indent=1)
-        atomic_write(self.out / "results.json", lambda fh: fh.write(text.encode()))
+        write_results(results, self.out)  # strict JSON, paths relative to the study folder
         from .report import write_report
 
         write_report(results, self.out / "report.html")

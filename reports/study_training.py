@@ -55,7 +55,8 @@ class TrainingStages:
                          "n_per_class": p.tsaug_n_per_class if tsaug else p.cnn_n_per_class, "tests": sets,
                          "seed": seed, "run_seeds": run_seeds(seed, self.cfg.seed, p.cnn_seeds, "cnn", name),
                          "model_params": {"epochs": p.tsaug_epochs if tsaug else p.cnn_epochs,
-                                          "patience": p.cnn_patience, "normalisation": p.normalisation},
+                                          "patience": p.cnn_patience, "normalisation": p.normalisation,
+                                          "device": self.cfg.device},
                          "model_path": str(self.out / "models" / f"cnn_{name}_run{{run}}.zip")}
         return out
 
@@ -67,9 +68,11 @@ class TrainingStages:
         """Every strategy's stage result (cached; uncached strategies go to the executor together)."""
         todo = [j for name, j in cnn_jobs.items() if not self.cache.has(f"cnn_{name}", self._cnn_key(j), CNN_NEEDS)]
         if len(todo) > 1 and self.cfg.workers > 1:
+            for job in todo:
+                self.cache.started(f"cnn_{job['name']}")
             for job, res in zip(todo, executor.map(jobs.train_and_test, todo)):
                 self.cache.store(f"cnn_{job['name']}", self._cnn_key(job), res,
-                                 res["data_seconds"] + res["train_seconds"])
+                                 res["data_seconds"] + res["train_seconds"], " in a worker (data and training)")
         return {name: self.cache.run(f"cnn_{name}", self._cnn_key(j), lambda j=j: jobs.train_and_test(j), CNN_NEEDS)
                 for name, j in cnn_jobs.items()}
 
@@ -105,7 +108,8 @@ class TrainingStages:
             work = []
             for model in CEILING_MODELS:  # the CNN: like for like with the strategies' CNNs
                 first = child_seed(self.cfg.seed, "ceiling", model)
-                params = {"epochs": p.cnn_epochs, "patience": p.cnn_patience} if model == "cnn" else {}
+                params = {"epochs": p.cnn_epochs, "patience": p.cnn_patience, "device": self.cfg.device} \
+                    if model == "cnn" else {}
                 for seed in run_seeds(first, self.cfg.seed, p.cnn_seeds if model == "cnn" else 1, "ceiling", model):
                     work.append({"model": model, "seed": seed, "params": params, "X": X, "y": y, "tests": sets,
                                  "classes": classes})

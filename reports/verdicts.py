@@ -7,7 +7,9 @@ and a table cell cannot disagree.
 The rules:
 
 * **degenerate**: a class that no training run recognises (its recall 0 in every
-  run); a class missed by some runs only is said so ("in 1 of 3 runs");
+  run); a class missed by some runs only is said so ("in 1 of 3 runs"); the rule is
+  :func:`mdaug.classify.metrics.degenerate` (the verbs train, evaluate and baseline
+  apply the same one);
 * **worse than chance**: a balanced-accuracy interval entirely below 0.5; **not better
   than chance**: an interval that contains 0.5;
 * **majority**: an accuracy no better than always answering the commonest class of
@@ -30,6 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..classify.metrics import degenerate, degenerate_words
 from ..classify.protocol import PREFER, TIE, choose, ties
 
 CHANCE = 0.5
@@ -73,17 +76,11 @@ def chance(interval) -> str | None:
 
 def result(m: dict, classes, always=None) -> dict:
     """The labels of one result (metrics of :func:`mdaug.classify.metrics.evaluate_runs`)."""
-    cm = np.asarray(m["confusion_matrix"])
-    labels = list(m["labels"])
-    never_predicted = [labels[j] for j in range(len(labels)) if cm[:, j].sum() == 0]
     recalls = {c: (m["per_class"].get(c) or {}).get("recall") for c in classes}
-    zero = [c for c, r in recalls.items() if r == 0.0]
-    runs = m.get("runs") or []
-    partly = {c: sum(1 for r in runs if (r["recall"] or {}).get(c) == 0.0) for c in classes if c not in zero}
     ci = m.get("ci") or {}
-    out = {"degenerate": bool(zero), "zero_recall": zero, "never_predicted": never_predicted,
-           "degenerate_runs": {c: k for c, k in partly.items() if k}, "n_runs": len(runs) or 1,
-           "chance": chance(ci.get("balanced_accuracy")), "below_majority": None, "biased_towards": None}
+    out = {**degenerate(m, classes), "chance": chance(ci.get("balanced_accuracy")), "below_majority": None,
+           "biased_towards": None}
+    zero = out["zero_recall"]
     if always is not None and m["accuracy"] <= always[1] + 1e-12:
         out["below_majority"] = list(always)
     rc = {c: ((ci.get("per_class") or {}).get(c) or {}).get("recall") for c in classes}
@@ -97,15 +94,11 @@ def result(m: dict, classes, always=None) -> dict:
 
 def label(v: dict) -> str:
     """A result's verdicts as the short text of a table cell ('' when there is nothing to say)."""
-    parts = []
-    if v["degenerate"]:
-        z = ", ".join(v["zero_recall"])
-        never = [c for c in v["never_predicted"] if c in v["zero_recall"]]
-        parts.append(f"degenerate: recognises no {z}" + (f" (never predicts {', '.join(never)})" if never else ""))
-    elif v["biased_towards"]:
+    words = degenerate_words(v)
+    parts = words[:1] if v["degenerate"] else []
+    if not v["degenerate"] and v["biased_towards"]:
         parts.append(f"biased towards {v['biased_towards']}")
-    for c, k in v.get("degenerate_runs", {}).items():
-        parts.append(f"recognises no {c} in {k} of {v['n_runs']} runs")
+    parts += words[1:] if v["degenerate"] else words
     if v["chance"]:
         parts.append(v["chance"])
     if v["below_majority"]:

@@ -170,10 +170,11 @@ def test_metrics_agree_with_scikit_learn():
     assert m["confusion_matrix"] == skm.confusion_matrix(y_true, y_pred, labels=labels).tolist()
     p, r, _, n = skm.precision_recall_fscore_support(y_true, y_pred, labels=labels, zero_division=0)
     for i, lab in enumerate(labels):
-        assert m["per_class"][lab]["precision"] == pytest.approx(p[i])
+        if lab != "D":
+            assert m["per_class"][lab]["precision"] == pytest.approx(p[i])
         assert m["per_class"][lab]["recall"] == pytest.approx(r[i])
         assert m["per_class"][lab]["n"] == n[i]
-    assert m["per_class"]["D"]["precision"] == 0.0  # never predicted
+    assert m["per_class"]["D"]["precision"] is None  # never predicted: undefined, not scikit-learn's 0
     assert m["n"] == 16 and m["labels"] == labels
 
 
@@ -295,3 +296,26 @@ def test_tsaug_cross_validation_never_trains_on_its_test_fold(monkeypatch):
         test_rows = x[fold == k]
         assert len(xtr) == 8
         assert not any(np.array_equal(r, t) for r in xtr for t in test_rows)
+
+
+def test_undefined_precision_is_left_out_of_the_mean_over_runs():
+    from mdaug.classify.metrics import degenerate, evaluate_runs
+
+    y = np.array(["HELI"] * 4 + ["QUAD"] * 4)
+    runs = [np.array(["HELI", "HELI", "QUAD", "QUAD", "QUAD", "QUAD", "QUAD", "HELI"]),  # HELI precision 2/3
+            np.array(["QUAD"] * 8),                                                      # HELI never predicted
+            np.array(["HELI", "QUAD", "QUAD", "QUAD", "QUAD", "QUAD", "QUAD", "QUAD"])]  # HELI precision 1
+    m = evaluate_runs(y, np.stack(runs), labels=["HELI", "QUAD"], n_boot=200)
+    heli = m["per_class"]["HELI"]
+    assert heli["precision"] == pytest.approx((2 / 3 + 1) / 2)  # not (2/3 + 0 + 1) / 3
+    assert heli["precision_runs"] == 2 and m["per_class"]["QUAD"]["precision_runs"] == 3
+    lo, hi = m["ci"]["per_class"]["HELI"]["precision"]
+    assert 0 <= lo < hi <= 1
+    v = degenerate(m)
+    assert not v["degenerate"] and v["degenerate_runs"] == {"HELI": 1} and v["n_runs"] == 3
+    never = evaluate_runs(y, np.stack([runs[1], runs[1]]), labels=["HELI", "QUAD"], n_boot=50)
+    assert never["per_class"]["HELI"]["precision"] is None and never["per_class"]["HELI"]["precision_runs"] == 0
+    assert never["ci"]["per_class"]["HELI"]["precision"] is None
+    json.dumps(never, allow_nan=False)
+    v = degenerate(never)
+    assert v["degenerate"] and v["zero_recall"] == ["HELI"] and v["never_predicted"] == ["HELI"]

@@ -422,3 +422,25 @@ def test_stage_timings_keep_the_time_of_resumed_stages(tmp_path):
     results["resumed_stages"] = []
     text = visible_text(write_report(results, tmp_path / "fresh.html").read_text())
     assert "Stage timings (total 290 s)" in text
+
+
+def test_precision_undefined_in_some_runs_is_their_mean_and_says_over_how_many(tmp_path):
+    """A run that never predicts HELI leaves HELI's precision undefined: the mean is over
+    the other runs (not a 0 averaged in), and the cell says '2 of 3 runs'."""
+    results = synthetic_results(tmp_path / "study")
+    s = results["strategies"]["sigma_p_fit"]
+    n = len(s["predictions"]["new"][0])
+    s["predictions"]["new"][1] = "1" * n  # run 2 answers QUAD for every acquisition
+    results = statistics.score_study(results)
+    m = s["tests"]["new"]
+    heli = m["per_class"]["HELI"]
+    own = [r["precision"]["HELI"] for r in m["runs"]]
+    assert own[1] is None and heli["precision_runs"] == 2
+    assert heli["precision"] == pytest.approx((own[0] + own[2]) / 2)
+    page = write_report(results, tmp_path / "report.html").read_text()
+    start = page.index('<section id="strategies">')
+    table = page[start:page.index("<details>", start)]
+    row = next(r for r in re.findall(r"<tr.*?</tr>", table, flags=re.S) if "<td>sigma_p_fit" in r)
+    cells = re.findall(r"<td[^>]*>(.*?)</td>", row, flags=re.S)
+    assert 'data-key="strategies.sigma_p_fit.tests.new.per_class.HELI.precision"' in cells[6]
+    assert "2 of 3 runs" in cells[6] and "of 3 runs" not in cells[7]

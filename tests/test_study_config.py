@@ -18,7 +18,7 @@ def test_executors_agree_including_a_dask_local_cluster():
     want = SerialExecutor().map(_square_with_seed, items)
     for ex in (make_executor(2), make_executor(1, scheduler="local")):
         try:
-            assert ex.map(_square_with_seed, items) == want
+            assert list(ex.map(_square_with_seed, items)) == want  # map yields, in order
         finally:
             ex.close()
 

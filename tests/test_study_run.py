@@ -1,6 +1,7 @@
 """`mdaug run --quick` end to end: results, report, resume, user files."""
 import csv
 import json
+import os
 import re
 import shutil
 
@@ -26,8 +27,26 @@ def lookup(results, key):
     return v
 
 
+def _strict(text):
+    def refuse(token):
+        raise ValueError(f"results.json holds {token}: not strict JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def _strings(obj):
+    if isinstance(obj, dict):
+        obj = list(obj.values())
+    if isinstance(obj, list):
+        return [s for v in obj for s in _strings(v)]
+    return [obj] if isinstance(obj, str) else []
+
+
 def test_quick_study_writes_results_that_match_its_report(quick_study):
-    results = json.loads((quick_study / "results.json").read_text())
+    results = _strict((quick_study / "results.json").read_text())
+    paths = [s for s in _strings({k: v for k, v in results.items() if k != "invocation"}) if os.path.isabs(s)]
+    assert not paths  # relative to the study folder
+    assert (quick_study / results["data"]["new"]["path"]).is_file()
     page = (quick_study / "report.html").read_text()
     for sid in SECTIONS:
         assert f'<section id="{sid}">' in page, sid

@@ -1,0 +1,88 @@
+"""Long work is never silent: every stage of `mdaug run` logs its start and end, the
+stages computed in worker processes too (the parent when it sends them and when each
+comes back, in order; the worker when it takes a job up and when it is done), and a
+CNN stage logs each training run."""
+import dataclasses
+import re
+
+import numpy as np
+
+from mdaug.reports import jobs
+from mdaug.reports.cache import StageCache
+from mdaug.reports.executor import ProcessExecutor
+
+CLASSES = ["HELI", "QUAD"]
+
+
+def _toy(n=60, seed=0):
+    rng = np.random.default_rng(seed)
+    y = np.repeat(CLASSES, n // 2)
+    x = np.abs(rng.normal(0.1, 0.05, (n, 400)))
+    x[:, 200] = 1.0
+    x[y == "QUAD", 215] += 0.6
+    return x, y
+
+
+def test_the_stage_cache_logs_start_and_end_of_every_stage(tmp_path):
+    lines = []
+    cache = StageCache(tmp_path, log=lines.append)
+    cache.run("data", "k", lambda: {"a": 1})
+    cache.started("cnn_x")
+    cache.store("cnn_x", "k", {"b": 2}, 12.5)
+    StageCache(tmp_path, log=lines.append).run("data", "k", lambda: {"a": 1})  # a rerun resumes: said so
+    assert lines == ["[data] running ...", "[data] done in 0.0 s", "[cnn_x] running (sent to the workers) ...",
+                     "[cnn_x] done in 12.5 s in a worker", "[data] cached (0.0 s when computed)"]
+
+
+def test_worker_jobs_log_their_start_and_end_in_the_worker(capfd):
+    x, y = _toy()
+    work = [{"model": "nb", "seed": s, "params": {}, "X": x, "y": y, "tests": {"t": (x, y)}, "classes": CLASSES}
+            for s in (1, 2, 3)]
+    pool = ProcessExecutor(2)
+    try:
+        done = pool.map(jobs.fit_predict, work)
+        assert not isinstance(done, list)  # an iterator: each result as it comes, in order
+        results = list(done)
+    finally:
+        pool.close()
+    assert len(results) == 3
+    out = capfd.readouterr().out
+    for s in (1, 2, 3):
+        assert re.search(rf"\[ceiling: nb \(seed {s}\)\] started in worker \d+", out), out
+        assert re.search(rf"\[ceiling: nb \(seed {s}\)\] done in [\d.]+ s in worker \d+", out), out
+    # in the study's own process the stage cache logs instead: no second line
+    jobs.fit_predict(work[0])
+    assert "started in worker" not in capfd.readouterr().out
+
+
+def test_cnn_stages_in_workers_log_start_runs_and_end(tmp_path, capfd):
+    from mdaug.reports.config import StudyConfig
+    from mdaug.reports.study import Study
+    from mdaug.strategies import TrainingSpec
+
+    cfg = StudyConfig(seed=7).quick_version()
+    cfg.protocol = dataclasses.replace(cfg.protocol, cnn_n_per_class=60, cnn_epochs=1, cnn_seeds=2,
+                                       tsaug_n_per_class=30, tsaug_epochs=1)
+    lines = []
+    study = Study(cfg, tmp_path, log=lines.append)
+    x, y = _toy(40, 1)
+    specs = {n: [TrainingSpec("sigma_p_published", sigma_p=v, normalisation="peak", through_chain=False)]
+             for n, v in (("sigma_p_published", 0.2),)}
+    specs["tsaug"] = [TrainingSpec("tsaug", normalisation="peak", profiles=x, labels=y)]
+    cnn_jobs = study.cnn_jobs(specs, {"sigma_p_published": {"value": 0.2}}, ("select", (x, y), "x"),
+                              {"new": (x, y)})
+    pool = ProcessExecutor(2)
+    try:
+        study.cnns(cnn_jobs, pool)
+    finally:
+        pool.close()
+    for name in ("sigma_p_published", "tsaug"):
+        start = lines.index(f"[cnn_{name}] running (sent to the workers) ...")
+        end = next(i for i, ln in enumerate(lines) if ln.startswith(f"[cnn_{name}] done in ")
+                   and ln.endswith(" s in a worker (data and training)"))
+        assert start < end
+    out = capfd.readouterr().out
+    for name in ("sigma_p_published", "tsaug"):
+        assert re.search(rf"\[cnn_{name}\] started in worker \d+", out), out
+        assert f"[cnn_{name}] run 1/2 trained in " in out and f"[cnn_{name}] run 2/2 trained in " in out
+        assert re.search(rf"\[cnn_{name}\] done in [\d.]+ s in worker \d+", out), out
