@@ -57,6 +57,23 @@ def test_label_free_round_trip_keeps_every_line(cls):
     assert np.all(np.diff(w, axis=1) > 0)
 
 
+def test_label_free_prior_density_is_normalised():
+    """The closed-form prior density in u integrates to one: importance sampling from a
+    Gaussian fitted to prior draws (HELI: exact, one engine)."""
+    from scipy.stats import multivariate_normal
+
+    ref = load_reference("HELI")
+    pr = Priors.from_reference(ref)
+    space, lf = DroneSpace(1, pr), LabelFree(1, pr, ref.to_array())
+    rng = np.random.default_rng(0)
+    u = lf.to_unbounded(lf.quantities(space.vectors(space.sample_prior(20000, rng))))
+    assert np.all(np.isfinite(lf.log_prior_u(u)))
+    mu, cov = u.mean(0), 1.5 * np.cov(u.T)
+    z = rng.multivariate_normal(mu, cov, 200000)
+    w = np.exp(lf.log_prior_u(z) - multivariate_normal(mu, cov).logpdf(z))
+    assert abs(w.mean() - 1.0) < 4 * w.std() / np.sqrt(len(w)) + 0.02
+
+
 def test_quantities_outside_the_prior_are_flagged():
     ref = load_reference("HELI")
     pr = Priors.from_reference(ref)
@@ -210,8 +227,8 @@ def test_emcee_route_on_the_learned_likelihood_stays_in_the_prior(tiny):
     post = LearnedPosterior(est, y[0])
     run, fit = sample(post, u, CalibrationSettings(check_every=50, max_steps=200, time_budget=20), 4)
     s = run.draws()
-    assert s.shape[1] == post.space.dim == 8
-    assert np.all(np.isfinite(post.space.log_prior(s)))
+    assert s.shape[1] == post.dim == 8
+    assert np.all(np.isfinite(post.label_free.log_prior_u(s)))
     assert np.isfinite(fit["log_post"]) and fit["log_post"] >= fit["start_log_post"] - 1e-9
     assert run.reason  # converged or says why not
 

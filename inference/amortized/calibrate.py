@@ -72,9 +72,8 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
         with threadpool_limits(settings.threads):
             post = LearnedPosterior(est, data)
             run, fit = sample(post, u[:1000], settings, child_seed(ss, "emcee"))
-        s = run.draws()
-        x_emcee = post.space.vectors(s)
-        names = post.space.names
+        x_emcee = post.vectors(run.draws())
+        names = post.label_free.names
         diag["emcee"] = {"converged": bool(run.converged), "reason": run.reason, "seconds": float(run.seconds),
                          "tau_max": float(run.tau.max()), "steps": int(run.n_steps),
                          "steps_over_tau": float(run.n_steps / run.tau.max()),

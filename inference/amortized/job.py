@@ -124,7 +124,7 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
             run, _ = sample(post, u, settings, s)
             draws = run.draws()
             pick = np.linspace(0, len(draws) - 1, n).round().astype(int)
-            return lf.quantities(post.space.vectors(draws[pick])), run.converged
+            return lf.from_unbounded(draws[pick]), run.converged
 
         k = min(mcmc_truths, n_truths)
         out["emcee"] = run_sbc(mcmc, truths[:k], profiles[:k], lf.names, prior_q=prior_q, seed=seed,

@@ -150,6 +150,45 @@ class LabelFree:
         x[~ok] = np.nan_to_num(x[~ok])
         return x, ok
 
+    def log_prior_u(self, u: np.ndarray) -> np.ndarray:
+        """Log density of the calibration prior in u (n, d), the pushforward of the
+        uniform box of the drone's physics (w_a < w_b) through the label-free map:
+        per engine the sum over the labellings the prior allows of 1 / (S D) (the
+        Jacobian from (w_a, w_b, C_p, C_m) to line frequencies, S = w_a + w_b,
+        D = w_b - w_a) over the box volume, times the Jacobian from q to u; -inf
+        where no labelling fits. Gamma ratios (relative to the engine of the lowest
+        line, not the prior's first engine) are taken flat on twice the prior's
+        lnG range: exact for one engine, an approximation with several."""
+        u = np.atleast_2d(np.asarray(u, float))
+        q = self.from_unbounded(u)
+        b = self.priors.bounds
+        width = lambda name: b[name][1] - b[name][0]  # noqa: E731
+        log_vol = (np.log(width("w_a")) + np.log(width("w_b")) - np.log(2.0) + np.log(width("C_p"))
+                   + np.log(width("C_m")) + sum(np.log(width(f"A_{r}")) for r in "abpm"))
+        inside = lambda v, name: (v >= b[name][0]) & (v <= b[name][1])  # noqa: E731
+        out = np.zeros(len(u))
+        j = 0
+        for k in range(self.E):
+            w, a = q[:, j: j + 4], q[:, j + 4: j + 8]
+            wp, ap = w[:, _PERMS], a[:, _PERMS]
+            s, d = wp[..., 0] + wp[..., 1], wp[..., 1] - wp[..., 0]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                cp, cm = wp[..., 2] / s, wp[..., 3] / d
+                valid = ((d > 0) & inside(cp, "C_p") & inside(cm, "C_m") & inside(wp[..., 0], "w_a")
+                         & inside(wp[..., 1], "w_b") & inside(ap[..., 0], "A_a") & inside(ap[..., 1], "A_b")
+                         & inside(ap[..., 2], "A_p") & inside(ap[..., 3], "A_m"))
+                dens = np.where(valid, 1.0 / (s * d), 0.0).sum(axis=1)
+                out += np.log(dens) - log_vol
+            r = a / self.a_max  # Jacobian of q -> u: w1, the gaps, A (1 - A / A_max)
+            out += (np.log(w[:, 0]) + np.log(np.diff(w, axis=1)).sum(1) + np.log(a * (1 - r)).sum(1))
+            j += 8
+            if k:
+                lo, hi = b["lnG"]
+                out += np.where(np.abs(q[:, j]) <= 2 * max(abs(lo), abs(hi)), -np.log(4 * (hi - lo) / 2), -np.inf)
+                j += 1
+        out[~np.isfinite(out)] = -np.inf
+        return out
+
     def aligned(self, x: np.ndarray) -> np.ndarray:
         """Vectors relabelled to the reference's labelling (:func:`align_lines`)."""
         return align_lines(x, self.reference)

@@ -51,7 +51,7 @@ def one(cls: str, ramps: int, n: int, workers: int, out: str, work: str, device:
     cfg = default_training()
     est = train_estimator(spec, n, os.path.join(work, name), os.path.join(out, f"{name}.zip"), seed=seed,
                           workers=workers, device=device, net_cfg=default_nets(cls),
-                          train_cfg=cfg, post_budget=post_budget, ratio_budget=ratio_budget,
+                          train_cfg=cfg, sim_budget=sim_budget, post_budget=post_budget, ratio_budget=ratio_budget,
                           sbc_truths=sbc_truths, shard_size=shard_size, progress=False, log=log)
     log(f"done: {est.meta['job_seconds']:.0f} s")
 
