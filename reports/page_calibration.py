@@ -19,7 +19,7 @@ from .verdicts import FAR, nuisances
 def _sbc_text(cal: dict, w: Html) -> str:
     sbc = cal.get("sbc")
     if not sbc:
-        return "not run in the study (see README: SBC)."
+        return "not run in the study (see docs/calibration.md)."
     share = sbc.get("outer_share")
     p = sbc.get("pooled_p")
     n = sbc.get("n_replicates")

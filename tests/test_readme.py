@@ -1,5 +1,5 @@
-"""The README's example block ("The jobs, one verb each") runs in order from an empty
-folder as written.
+"""The jobs block of docs/cli.md ("The jobs, one verb each", linked from the README) runs
+in order from an empty folder as written.
 
 Fast: every line parses with the real parser, every file a line reads is made by an
 earlier line, the study config example reads those files, and the first lines (the
@@ -12,7 +12,7 @@ import pytest
 
 from mdaug.cli import build_parser, main
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+README = Path(__file__).resolve().parents[1] / "docs" / "cli.md"
 
 
 def jobs_block() -> list[list[str]]:

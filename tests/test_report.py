@@ -278,7 +278,7 @@ def test_calibration_shows_status_and_sbc(tmp_path):
     page = write_report(results, tmp_path / "report.html").read_text()
     text = visible_text(page)
     assert "HELI: converged" in text and "QUAD: NOT CONVERGED" in text
-    assert text.count("not run in the study (see README: SBC)") == 2
+    assert text.count("not run in the study (see docs/calibration.md)") == 2
     assert "figures/corner_QUAD.png" in page  # the full corner plot, linked
     with_sbc = synthetic_results(tmp_path / "sbc", sbc=True)
     text = visible_text(write_report(with_sbc, tmp_path / "sbc" / "report.html").read_text())
