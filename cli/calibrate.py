@@ -340,7 +340,8 @@ def add_calibrate(sub, parents, help):
                         f"(default: {d.sampler})")
     g.add_argument("--time-budget", type=positive_float, default=None, metavar="SECONDS",
                    help="stop sampling after this many seconds when not converged before (the run is then "
-                        f"flagged not converged; rerun to continue) (default: {d.time_budget:g})")
+                        f"flagged not converged; rerun to continue) (default: {d.time_budget:g}; the emcee route "
+                        "beside the amortized posterior: 120)")
     g.add_argument("--max-steps", type=positive_int, default=None, metavar="N",
                    help=f"emcee step budget, steps per walker (default: {_cap(d.max_steps)}; --quick: "
                         f"{_cap(q.max_steps)})")

@@ -6,6 +6,9 @@ from __future__ import annotations
 from .calibrate import EXIT_NOT_CONVERGED
 from .common import result, warn
 
+EMCEE_BUDGET = 120.0
+"""Default seconds of the emcee route beside the amortized posterior (``--time-budget``)."""
+
 
 CLOSED_FORM_ONLY = ("likelihood", "draws", "ramps_drawn", "fit_budget", "fit_algorithm", "starts", "normalisation",
                     "particles", "backend", "engines")
@@ -50,6 +53,8 @@ def run_amortized(args, profiles, drones, settings, acquisition, cls) -> int:
     if len(set(drones.tolist())) > 1:
         warn("calibrate", f"{args.measured} holds {len(set(drones.tolist()))} drones of {cls} (field 'specimen'); "
                           "they are calibrated as one drone: --specimen ID calibrates one of them")
+    if args.time_budget is None:  # the amortized posterior is the one used: the chain beside it gets minutes
+        settings = settings.replace(time_budget=EMCEE_BUDGET)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         res = calibrate_amortized(profiles, cls.upper(), acquisition=acquisition, estimator=args.estimator,

@@ -130,6 +130,8 @@ def calibration_section(r: dict, figs: Figures, w: Html, report_dir: Path) -> st
                    f"{w.num(k + '.acceptance_mean', d.get('acceptance_mean'), 2)}; "
                    f"{w.num(k + '.seconds', d.get('seconds'), 0)} s on {fmt(c.get('n_profiles'))} measurements.</li>"
                    f"<li><b>SBC</b>: {_sbc_text(c, w)}</li></ul>")
+        if d.get("out_of_range"):
+            out.append(f"<p class='warn'>{w.esc(d.get('out_of_range_why', 'measurements unlike the training set'))}</p>")
         if c.get("lines"):
             out.append(figs.embed(f"posterior_{cls}", figures.posterior_lines_figure(c, cls),
                                   f"{cls} posterior, label-free: each engine's four vibration lines, frequency in Hz "
