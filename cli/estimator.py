@@ -35,21 +35,6 @@ def _meas(text: str) -> int:
     return v
 
 
-def strict_json(obj):
-    """obj with NaN and inf as None (null), numpy scalars as floats: strict JSON."""
-    import math
-
-    if isinstance(obj, dict):
-        return {str(k): strict_json(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [strict_json(v) for v in obj]
-    if hasattr(obj, "tolist"):
-        return strict_json(obj.tolist())
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
-
-
 def _interrupted(args) -> str:
     if args.verb == "train-estimator":
         return (f"the simulations and training checkpoints in {_work(args)} are kept; run the same command again "
@@ -132,7 +117,9 @@ def run_sbc(args) -> int:
     if args.json is not None:
         from ..radar.io import atomic_write
 
-        text = json.dumps(strict_json(out), indent=1, allow_nan=False)
+        from ..reports.results_file import plain
+
+        text = json.dumps(plain(out, args.json.parent), indent=1, allow_nan=False)
         atomic_write(args.json, lambda fh: fh.write(text.encode()))
         result(f"wrote {args.json}")
     return 0

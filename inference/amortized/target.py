@@ -104,6 +104,21 @@ class LabelFree:
                 j += 1
         return q
 
+    def _labellings(self, w: np.ndarray, a: np.ndarray):
+        """Every labelling of an engine's sorted lines w, a (n, 4): frequencies and
+        amplitudes in role order a, b, p, m (n, 24, 4), S = w_a + w_b, D = w_b - w_a,
+        C_p, C_m (n, 24) and whether the prior allows it (w_a < w_b, every bound)."""
+        b = self.priors.bounds
+        inside = lambda v, name: (v >= b[name][0]) & (v <= b[name][1])  # noqa: E731
+        wp, ap = w[:, _PERMS], a[:, _PERMS]
+        s, d = wp[..., 0] + wp[..., 1], wp[..., 1] - wp[..., 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cp, cm = wp[..., 2] / s, wp[..., 3] / d
+            valid = ((d > 0) & inside(cp, "C_p") & inside(cm, "C_m") & inside(wp[..., 0], "w_a")
+                     & inside(wp[..., 1], "w_b") & inside(ap[..., 0], "A_a") & inside(ap[..., 1], "A_b")
+                     & inside(ap[..., 2], "A_p") & inside(ap[..., 3], "A_m"))
+        return wp, ap, s, d, cp, cm, valid
+
     # ---- q -> class vectors ---------------------------------------------------------------------
     def vectors(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """q (n, dim) -> (class vectors (n, 13E), ok (n,)). Each engine's lines get the
@@ -113,25 +128,18 @@ class LabelFree:
         where no labelling of some engine fits the prior: such a q lies outside the
         prior's support (phases are 0). Gamma ratios are not bounded here."""
         q = np.atleast_2d(np.asarray(q, float))
-        n, b = len(q), self.priors.bounds
+        n = len(q)
         out = np.zeros((n, self.E, N_PARAMS))
         ok = np.ones(n, bool)
         w_ref, _, _ = engine_lines(self.reference.reshape(self.E, N_PARAMS))
         j, lng = 0, np.zeros((n, self.E))
-        inside = lambda v, name: (v >= b[name][0]) & (v <= b[name][1])  # noqa: E731
         for k in range(self.E):
             w, a = q[:, j: j + 4], q[:, j + 4: j + 8]
             j += 8
             if k:
                 lng[:, k] = q[:, j]
                 j += 1
-            wp, ap = w[:, _PERMS], a[:, _PERMS]  # (n, 24, 4) in role order a, b, p, m
-            s, d = wp[..., 0] + wp[..., 1], wp[..., 1] - wp[..., 0]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                cp, cm = wp[..., 2] / s, wp[..., 3] / d
-            valid = ((d > 0) & inside(cp, "C_p") & inside(cm, "C_m") & inside(wp[..., 0], "w_a")
-                     & inside(wp[..., 1], "w_b") & inside(ap[..., 0], "A_a") & inside(ap[..., 1], "A_b")
-                     & inside(ap[..., 2], "A_p") & inside(ap[..., 3], "A_m"))
+            wp, ap, s, d, cp, cm, valid = self._labellings(w, a)
             with np.errstate(divide="ignore"):
                 cost = np.abs(np.log(np.maximum(wp, 1e-300)) - np.log(w_ref[k % len(w_ref)])).sum(-1)
             pick = np.argmin(np.where(valid, cost, np.inf), axis=1)
@@ -165,18 +173,12 @@ class LabelFree:
         width = lambda name: b[name][1] - b[name][0]  # noqa: E731
         log_vol = (np.log(width("w_a")) + np.log(width("w_b")) - np.log(2.0) + np.log(width("C_p"))
                    + np.log(width("C_m")) + sum(np.log(width(f"A_{r}")) for r in "abpm"))
-        inside = lambda v, name: (v >= b[name][0]) & (v <= b[name][1])  # noqa: E731
         out = np.zeros(len(u))
         j = 0
         for k in range(self.E):
             w, a = q[:, j: j + 4], q[:, j + 4: j + 8]
-            wp, ap = w[:, _PERMS], a[:, _PERMS]
-            s, d = wp[..., 0] + wp[..., 1], wp[..., 1] - wp[..., 0]
+            _, _, s, d, _, _, valid = self._labellings(w, a)
             with np.errstate(divide="ignore", invalid="ignore"):
-                cp, cm = wp[..., 2] / s, wp[..., 3] / d
-                valid = ((d > 0) & inside(cp, "C_p") & inside(cm, "C_m") & inside(wp[..., 0], "w_a")
-                         & inside(wp[..., 1], "w_b") & inside(ap[..., 0], "A_a") & inside(ap[..., 1], "A_b")
-                         & inside(ap[..., 2], "A_p") & inside(ap[..., 3], "A_m"))
                 dens = np.where(valid, 1.0 / (s * d), 0.0).sum(axis=1)
                 out += np.log(dens) - log_vol
             r = a / self.a_max  # Jacobian of q -> u: w1, the gaps, A (1 - A / A_max)
