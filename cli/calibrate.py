@@ -11,11 +11,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import (BYTES_SPECTRUM, SECONDS_LIKELIHOOD_RAMP, add_verb, check_size, count_2, info, positive_float,
+from .common import (BYTES_SPECTRUM, EXIT_NOT_CONVERGED, SECONDS_LIKELIHOOD_RAMP, add_verb, check_size, count_2,
+                     info, positive_float,
                      positive_int, result, seed_int, warn)
 from .options import acquisition_from_args, acquisition_given, add_acquisition_options
 
-EXIT_NOT_CONVERGED = 3
 
 
 def engines_arg(text: str):

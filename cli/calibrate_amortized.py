@@ -3,8 +3,7 @@ method a command line asks for, and the run of one drone through
 :func:`mdaug.inference.amortized.calibrate.calibrate_amortized`."""
 from __future__ import annotations
 
-from .calibrate import EXIT_NOT_CONVERGED
-from .common import result, warn
+from .common import EXIT_NOT_CONVERGED, result, warn
 
 EMCEE_BUDGET = 120.0
 """Default seconds of the emcee route beside the amortized posterior (``--time-budget``)."""

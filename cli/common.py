@@ -23,6 +23,10 @@ MODELS = ("svm", "nb", "xgb", "cnn")
 
 
 # ---- parser and errors -------------------------------------------------------------
+EXIT_NOT_CONVERGED = 3
+"""Exit status of a calibration whose sampler did not converge (its file is written, flagged)."""
+
+
 class UsageError(Exception):
     """A bad command line or option value: printed as one ``PROG: error: ...`` line, exit 2."""
 

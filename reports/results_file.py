@@ -58,3 +58,20 @@ def write_results(results: dict, folder: Path, name: str = "results.json") -> Pa
     path = Path(folder) / name
     atomic_write(path, lambda fh: fh.write(text.encode()))
     return path
+
+
+def jsonable(obj):
+    """Plain Python types for JSON (numpy scalars and arrays converted)."""
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, Path):
+        return str(obj)
+    if hasattr(obj, "to_dict") and hasattr(obj, "index"):  # a pandas table: {row: {column: value}}
+        return jsonable(obj.to_dict(orient="index"))
+    return obj

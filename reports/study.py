@@ -46,6 +46,7 @@ from .cache import StageCache, settings_key
 from .config import StudyConfig
 from .executor import make_executor
 from .identity import check_study_folder, claim, study_key
+from .results_file import jsonable as _jsonable
 from .results_file import write_results
 from .study_training import TrainingStages, chosen_spec
 
@@ -391,20 +392,3 @@ def _imap(executor, fn, items):
     if executor.name == "serial":
         return (fn(item) for item in items)
     return executor.map(fn, items)
-
-
-def _jsonable(obj):
-    """Plain Python types for JSON (numpy scalars and arrays converted)."""
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, Path):
-        return str(obj)
-    if hasattr(obj, "to_dict") and hasattr(obj, "index"):  # a pandas table: {row: {column: value}}
-        return _jsonable(obj.to_dict(orient="index"))
-    return obj
