@@ -61,6 +61,10 @@ def _checkpoint_files(args) -> list[Path]:
     return [p for s in stems for p in (s, Path(f"{s}.fit.json"))]
 
 
+MAX_MEASUREMENTS = 64
+"""Most measurements one calibration takes (the cost of every likelihood grows with them)."""
+
+
 def check_calibrate_sizes(args, settings, n_measurements: int) -> None:
     """The fit's and the sampler's sizes against memory and time (before any work)."""
     from ..generator import load_reference
@@ -141,6 +145,10 @@ def run_calibrate(args) -> int:
               f"as {args.measured} states it" if from_file is not None else "the published single chirp (default)")
     settings = base.replace(threads=args.threads, progress=progress_enabled(),
                             range_offset=not args.no_range_offset, **overrides)
+    if len(profiles) > MAX_MEASUREMENTS and not args.population:
+        raise DataFileError(f"{args.measured}: field 'profiles' holds {len(profiles)} measurements of class {cls}; "
+                            f"one calibration takes at most {MAX_MEASUREMENTS} of one drone (the supported case is "
+                            "a handful; --specimen ID picks one drone, --population calibrates each)")
     check_calibrate_sizes(args, settings, len(profiles))
     info(f"calibrating {args.class_name.upper()} from {len(profiles)} profile(s) of {args.measured} "
          f"(engines {args.engines or 'reference'}, seed {args.seed}; chain checkpoint {backend})")

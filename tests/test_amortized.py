@@ -283,3 +283,15 @@ def test_calibrate_verb_refuses_what_the_estimator_cannot_take(tiny, tmp_path, r
              "--likelihood", "marginal"], inputs, out, ["--likelihood applies to --method likelihood"])
     refused(["calibrate", str(good), "--class", "HELI", "--out", post, "--estimator", str(inputs / "none.zip")],
             inputs, out, ["none.zip"])
+
+
+def test_calibrate_refuses_too_many_measurements_of_one_drone(tmp_path, refused):
+    inputs, out = tmp_path / "in", tmp_path / "out"
+    inputs.mkdir()
+    out.mkdir()
+    rng = np.random.default_rng(0)
+    y = rng.uniform(0.01, 1.0, size=(70, 400))
+    many = _profile_file(inputs / "many.npz", y)
+    for method in ("amortized", "likelihood"):
+        refused(["calibrate", str(many), "--class", "HELI", "--method", method, "--out", str(out / "p.nc")], inputs,
+                out, ["many.npz", "field 'profiles' holds 70 measurements", "at most 64"])
