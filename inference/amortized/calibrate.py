@@ -44,7 +44,7 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
     :class:`~mdaug.inference.settings.CalibrationSettings` of the emcee route (its
     time budget, 50-tau rule, progress); emcee: False skips that route."""
     from ..settings import CalibrationSettings
-    from .estimator import AmortizedEstimator
+    from .estimator import AmortizedEstimator, EstimatorError
     from .mcmc import LearnedPosterior, sample
 
     if route not in ROUTES:
@@ -60,7 +60,10 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
     lf = est.label_free
     ss = seed_sequence(random_state)
     t0 = time.perf_counter()
-    u, inside = est.sample_u(data, n_draws, child_seed(ss, "amortized"), strict=False)
+    try:
+        u, inside = est.sample_u(data, n_draws, child_seed(ss, "amortized"))
+    except EstimatorError as exc:  # data far outside the training set: refused, not calibrated
+        raise EstimatorError(f"{source}: {exc}") from None
     t_amortized = time.perf_counter() - t0
     x_amortized, _ = lf.vectors(lf.from_unbounded(u))
     diag = {"sampler": "amortized", "route": route, "amortized_seconds": t_amortized,
