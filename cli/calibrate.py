@@ -150,15 +150,17 @@ def run_calibrate(args) -> int:
                             f"one calibration takes at most {MAX_MEASUREMENTS} of one drone (the supported case is "
                             "a handful; --specimen ID picks one drone, --population calibrates each)")
     check_calibrate_sizes(args, settings, len(profiles))
+    from .calibrate_amortized import calibration_method, run_amortized
+
+    method = calibration_method(args, acquisition)
+    how = ("the class's trained estimator" if method == "amortized" else
+           f"engines {args.engines or 'reference'}; chain checkpoint {backend}")
     info(f"calibrating {args.class_name.upper()} from {len(profiles)} profile(s) of {args.measured} "
-         f"(engines {args.engines or 'reference'}, seed {args.seed}; chain checkpoint {backend})")
+         f"({how}; seed {args.seed})")
     result(f"acquisition ({source}): {acquisition.describe()}")
     if len(profiles) == 1:
         warn("calibrate", "one profile only: the posterior is weakly identified (the supported case is a handful "
                           "of measurements, typically 5)")
-    from .calibrate_amortized import calibration_method, run_amortized
-
-    method = calibration_method(args, acquisition)
     if args.population:
         return run_population(args, profiles, drones, settings, acquisition)
     if method == "amortized":

@@ -86,7 +86,7 @@ def amortized_report(res, identified_ratio: float) -> str:
         lines.append(f"emcee on the learned likelihood: {m['n_walkers']} walkers x {m['steps']} steps "
                      f"({m['seconds']:.1f} s), max tau {m['tau_max']:.0f} steps, chain/tau {m['steps_over_tau']:.1f}, "
                      f"min ESS {m['ess_min']:.0f}, R-hat max {m['rhat_max']:.3f}, acceptance {m['acceptance_mean']:.2f}: "
-                     + ("converged" if m["converged"] else "NOT CONVERGED") + f" ({m['reason']})")
+                     + (m["reason"] if m["reason"].startswith("NOT CONVERGED") else f"converged ({m['reason']})"))
     lines.append(f"posterior used by the strategies: {d['route']} ({d['reason']})")
     if d.get("out_of_range"):
         lines.append(f"WARNING: {d['out_of_range_why']}")
