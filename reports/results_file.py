@@ -29,19 +29,13 @@ def plain(obj, folder: Path):
     # directory), as an absolute path, and with its links resolved
     prefixes = tuple({str(given) + os.sep, str(folder) + os.sep, str(folder.resolve()) + os.sep})
 
-    def convert(v):
+    def convert(v):  # v holds plain Python types only (jsonable below)
         if isinstance(v, dict):
-            return {str(k): convert(x) for k, x in v.items()}
-        if isinstance(v, (list, tuple)):
+            return {k: convert(x) for k, x in v.items()}
+        if isinstance(v, list):
             return [convert(x) for x in v]
-        if isinstance(v, np.ndarray):
-            return convert(v.tolist())
-        if isinstance(v, np.generic):
-            return convert(v.item())
         if isinstance(v, float):
             return v if math.isfinite(v) else None
-        if isinstance(v, Path):
-            v = str(v)
         if isinstance(v, str) and v.startswith(prefixes):
             base = folder.resolve() if v.startswith(str(folder.resolve()) + os.sep) else folder
             return os.path.relpath(os.path.abspath(v), base)
@@ -49,7 +43,7 @@ def plain(obj, folder: Path):
             return os.path.relpath(v, folder)
         return v
 
-    return convert(obj)
+    return convert(jsonable(obj))
 
 
 def write_results(results: dict, folder: Path, name: str = "results.json") -> Path:
