@@ -104,7 +104,7 @@ def sample(post: LearnedPosterior, u_draws: np.ndarray, settings, seed, *, n_pol
     u_fit, v_fit = polish(post, best)
     fit = {"best": u_fit.tolist(), "log_post": v_fit, "start_log_post": float(lp.max()), "n_starts": len(best),
            "seconds": time.perf_counter() - t0}
-    n_walkers = int(settings.n_walkers) or max(2 * post.dim + 2, 32)
+    n_walkers = max(int(settings.n_walkers), 2 * post.dim + 2) if settings.n_walkers else max(2 * post.dim + 2, 32)
     rng = np.random.default_rng(seed_sequence(seed))
     pick = rng.choice(len(starts), size=n_walkers, replace=len(starts) < n_walkers)
     p0 = starts[pick].copy()
