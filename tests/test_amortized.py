@@ -295,3 +295,29 @@ def test_calibrate_refuses_too_many_measurements_of_one_drone(tmp_path, refused)
     for method in ("amortized", "likelihood"):
         refused(["calibrate", str(many), "--class", "HELI", "--method", method, "--out", str(out / "p.nc")], inputs,
                 out, ["many.npz", "field 'profiles' holds 70 measurements", "at most 64"])
+
+
+def test_train_estimator_and_sbc_verbs(tmp_path, capsys, refused):
+    """train-estimator writes a checked estimator and resumes from its work folder; sbc
+    reads it and writes strict JSON; cuda without a GPU is refused before any work."""
+    import json
+
+    from mdaug.cli import main
+
+    out = tmp_path / "h.zip"
+    argv = ["train-estimator", "--class", "HELI", "--ramps", "4", "--simulations", "100", "--measurements", "3",
+            "--epochs", "1", "--sbc-truths", "0", "--out", str(out)]
+    assert main(argv) == 0, capsys.readouterr().err
+    assert AmortizedEstimator.load(out).meta["n_simulations"] == 100
+    assert main(argv[:-1] + [str(tmp_path / "h2.zip"), "--work", f"{out}.work"]) == 0
+    assert "resumed at epoch 1" in capsys.readouterr().out
+    js = tmp_path / "sbc.json"
+    assert main(["sbc", "--class", "HELI", "--ramps", "4", "--estimator", str(out), "--truths", "3",
+                 "--json", str(js)]) == 0
+    data = json.loads(js.read_text(), parse_constant=lambda c: pytest.fail(f"non-strict JSON token {c}"))
+    assert data["amortized"]["n_replicates"] == 3
+    if not torch.cuda.is_available():
+        empty = tmp_path / "empty"
+        empty.mkdir()
+        refused(["train-estimator", "--class", "HELI", "--ramps", "4", "--device", "cuda", "--out",
+                 str(empty / "x.zip")], empty, empty, ["device 'cuda'", "no GPU"])

@@ -76,10 +76,11 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
 
 
 def sbc_data(spec: SimulationSpec, n: int, seed, workers: int = 1):
-    """Fresh drones for SBC: (vectors (n, 13E), profiles (n, 5, L))."""
+    """Fresh drones for SBC: (vectors (n, 13E), profiles (n, 5, L); fewer measurements
+    when the estimator takes fewer)."""
     from concurrent.futures import ProcessPoolExecutor
 
-    spec5 = replace(spec, n_measurements=SBC_MEASUREMENTS)
+    spec5 = replace(spec, n_measurements=min(SBC_MEASUREMENTS, spec.n_measurements))
     chunks = np.array_split(np.arange(n), max(1, min(workers, n)))
     seeds = seed_sequence(seed).spawn(len(chunks))
     if workers > 1 and len(chunks) > 1:
@@ -108,7 +109,7 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
         accepted.append(share)
         return lf.from_unbounded(u), True
 
-    out = {"n_measurements": SBC_MEASUREMENTS,
+    out = {"n_measurements": int(profiles.shape[1]),
            "amortized": run_sbc(amortized, truths, profiles, lf.names, prior_q=prior_q, seed=seed,
                                 to_unbounded=lf.to_unbounded, progress=progress, desc="SBC amortized")}
     out["amortized"]["inside_prior_share"] = float(np.mean(accepted))
