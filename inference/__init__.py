@@ -1,7 +1,9 @@
 """Calibration with uncertainty: measured profiles -> posterior over a class vector.
 
-nlopt global fit, emcee posterior (resumable, HDF5), arviz InferenceData (NetCDF),
-corner and trace plots, engine-count selection, posterior augmentation.
+The amortized calibration (:mod:`.amortized`: trained estimators, the default for
+measured acquisitions); the closed-form likelihood route: nlopt global fit, emcee
+posterior (resumable, HDF5), engine-count selection; arviz InferenceData (NetCDF),
+corner and trace plots, posterior augmentation, the population of drones.
 Imports :mod:`mdaug.generator` and :mod:`mdaug.radar` only.
 """
 from .calibrate import calibrate

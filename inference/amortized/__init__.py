@@ -1,1 +1,15 @@
-"""Amortized calibration (module docs in each file)."""
+"""Amortized calibration: simulation-based inference trained on mdaug's own simulator.
+
+Rooms: :mod:`.target` (the label-free quantities, their coordinates, the prior's
+density there, the drone space truths are drawn in); :mod:`.simulate` (training
+drones through the scene simulator and the chain, in resumable shards); :mod:`.nets`
+and :mod:`.train` (sbi's flow over a permutation-invariant embedding, the ratio
+network, the resumable training loop); :mod:`.estimator` (the trained estimator as a
+checked file); :mod:`.job` (training as a job, ending with its SBC); :mod:`.sbc` and
+:mod:`.plots` (SBC of any route); :mod:`.mcmc` (nlopt + emcee on the learned
+likelihood); :mod:`.calibrate` (one drone -> a CalibrationResult); :mod:`.shipped`
+(the estimators in ``data/``). Imports :mod:`mdaug.generator`, :mod:`mdaug.radar` and
+the inference modules below it (layout, priors, likelihood preparation, ensemble,
+result, sbc summary). torch loads with :mod:`.nets`, :mod:`.train` and :mod:`.estimator`
+(not with :mod:`mdaug.inference`), sbi inside the functions that build networks.
+"""
