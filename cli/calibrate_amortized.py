@@ -10,7 +10,7 @@ EMCEE_BUDGET = 120.0
 
 
 CLOSED_FORM_ONLY = ("likelihood", "draws", "ramps_drawn", "fit_budget", "fit_algorithm", "starts", "normalisation",
-                    "particles", "backend", "engines")
+                    "particles", "backend", "engines", "trace")
 """Options of the likelihood route only (the amortized route has no such knob)."""
 
 
@@ -69,8 +69,6 @@ def run_amortized(args, profiles, drones, settings, acquisition, cls) -> int:
     if args.corner is not None:
         res.plot_corner(args.corner)
         result(f"wrote {args.corner}")
-    if args.trace is not None:
-        raise ValueError("--trace: the amortized calibration keeps no chain in its file")
     if not res.converged:
         warn("calibrate", f"the chain did not converge ({res.diagnostics['reason']}); {args.out} is flagged "
                           "not converged")

@@ -321,3 +321,14 @@ def test_train_estimator_and_sbc_verbs(tmp_path, capsys, refused):
         empty.mkdir()
         refused(["train-estimator", "--class", "HELI", "--ramps", "4", "--device", "cuda", "--out",
                  str(empty / "x.zip")], empty, empty, ["device 'cuda'", "no GPU"])
+
+
+def test_calibrate_refuses_a_trace_of_the_amortized_route_before_any_work(tiny, tmp_path, refused):
+    est, path = tiny
+    _, y = simulate(est.spec, 1, 23)
+    inputs, out = tmp_path / "in", tmp_path / "out"
+    inputs.mkdir()
+    out.mkdir()
+    good = _profile_file(inputs / "good.npz", y[0][:3])
+    refused(["calibrate", str(good), "--class", "HELI", "--out", str(out / "p.nc"), "--estimator", str(path),
+             "--trace", str(out / "t.png")], inputs, out, ["--trace applies to --method likelihood"])
