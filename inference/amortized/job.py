@@ -100,7 +100,8 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
     lf = est.label_free
     vectors, profiles = sbc_data(est.spec, n_truths, seed, workers)
     truths = lf.quantities(vectors)
-    prior_q = lf.quantities(est.spec.space().vectors(est.spec.space().sample_prior(4000, np.random.default_rng(1))))
+    space = est.spec.space()
+    prior_q = lf.quantities(space.vectors(space.sample_prior(4000, np.random.default_rng(seed_sequence(seed, "prior")))))
 
     accepted = []
 

@@ -71,7 +71,8 @@ def simulate(spec: SimulationSpec, n: int, seed, scene=None) -> tuple[np.ndarray
     from ...generator.augment import Renderer
 
     truth_ss, data_ss = seed_sequence(seed).spawn(2)
-    x = spec.space().vectors(spec.space().sample_prior(n, seeded_rng(truth_ss)))
+    space = spec.space()
+    x = space.vectors(space.sample_prior(n, seeded_rng(truth_ss)))
     m = spec.n_measurements
     renderer = Renderer(spec.acquisition, normalisation="none", radar=spec.radar, through_chain=True, scene=scene)
     raw = renderer.render(np.repeat(x, m, axis=0), seeded_rng(data_ss))
