@@ -57,6 +57,14 @@ def _class(text: str) -> str:
     return name
 
 
+def _command(args, cls: str, epochs: int) -> str:
+    """The command line that trains this estimator again (kept in its file)."""
+    budgets = "".join(f" --{name}-budget {v:g}" for name, v in (("posterior", args.posterior_budget),
+                                                                 ("ratio", args.ratio_budget)) if v is not None)
+    return (f"mdaug train-estimator --class {cls} --ramps {args.ramps} --simulations {args.simulations} "
+            f"--measurements {args.measurements} --seed {args.seed} --epochs {epochs}{budgets} --out {args.out.name}")
+
+
 def run_train(args) -> int:
     from ..generator.acquisition import Acquisition
     from ..inference.amortized.job import train_estimator
@@ -81,6 +89,7 @@ def run_train(args) -> int:
                           device=args.device, net_cfg=default_nets(cls), train_cfg=cfg,
                           post_budget=args.posterior_budget, ratio_budget=args.ratio_budget,
                           sbc_truths=args.sbc_truths, sbc_mcmc_truths=args.sbc_emcee_truths,
+                          command=_command(args, cls, cfg.max_epochs),
                           progress=progress_enabled(), log=info)
     result(f"wrote {args.out} ({est.meta['job_seconds']:.0f} s)")
     return 0

@@ -234,6 +234,14 @@ def test_emcee_route_on_the_learned_likelihood_stays_in_the_prior(tiny):
 
 
 # ---- the calibrate verb ---------------------------------------------------------------------------
+def _folders(tmp_path):
+    """(inputs, outputs) folders of a refusal test (the refused fixture hashes both)."""
+    inputs, out = tmp_path / "in", tmp_path / "out"
+    inputs.mkdir()
+    out.mkdir()
+    return inputs, out
+
+
 def _profile_file(path, profiles, cls="HELI", ramps=4):
     np.savez(path, profiles=profiles, labels=np.array([cls] * len(profiles)), ramps_per_frame=np.array(ramps))
     return path
@@ -263,9 +271,7 @@ def test_calibrate_verb_writes_an_amortized_posterior(tiny, tmp_path, capsys):
 def test_calibrate_verb_refuses_what_the_estimator_cannot_take(tiny, tmp_path, refused):
     est, path = tiny
     _, y = simulate(est.spec, 1, 22)
-    inputs, out = tmp_path / "in", tmp_path / "out"
-    inputs.mkdir()
-    out.mkdir()
+    inputs, out = _folders(tmp_path)
     nan = y[0][:3].copy()
     nan[1, 5] = np.nan
     bad = _profile_file(inputs / "nan.npz", nan)
@@ -286,9 +292,7 @@ def test_calibrate_verb_refuses_what_the_estimator_cannot_take(tiny, tmp_path, r
 
 
 def test_calibrate_refuses_too_many_measurements_of_one_drone(tmp_path, refused):
-    inputs, out = tmp_path / "in", tmp_path / "out"
-    inputs.mkdir()
-    out.mkdir()
+    inputs, out = _folders(tmp_path)
     rng = np.random.default_rng(0)
     y = rng.uniform(0.01, 1.0, size=(70, 400))
     many = _profile_file(inputs / "many.npz", y)
@@ -308,7 +312,9 @@ def test_train_estimator_and_sbc_verbs(tmp_path, capsys, refused):
     argv = ["train-estimator", "--class", "HELI", "--ramps", "4", "--simulations", "100", "--measurements", "3",
             "--epochs", "1", "--sbc-truths", "0", "--out", str(out)]
     assert main(argv) == 0, capsys.readouterr().err
-    assert AmortizedEstimator.load(out).meta["n_simulations"] == 100
+    meta = AmortizedEstimator.load(out).meta
+    assert meta["n_simulations"] == 100
+    assert meta["command"].startswith("mdaug train-estimator --class HELI --ramps 4 --simulations 100")
     assert main(argv[:-1] + [str(tmp_path / "h2.zip"), "--work", f"{out}.work"]) == 0
     assert "resumed at epoch 1" in capsys.readouterr().out
     js = tmp_path / "sbc.json"
@@ -326,9 +332,7 @@ def test_train_estimator_and_sbc_verbs(tmp_path, capsys, refused):
 def test_calibrate_refuses_a_trace_of_the_amortized_route_before_any_work(tiny, tmp_path, refused):
     est, path = tiny
     _, y = simulate(est.spec, 1, 23)
-    inputs, out = tmp_path / "in", tmp_path / "out"
-    inputs.mkdir()
-    out.mkdir()
+    inputs, out = _folders(tmp_path)
     good = _profile_file(inputs / "good.npz", y[0][:3])
     refused(["calibrate", str(good), "--class", "HELI", "--out", str(out / "p.nc"), "--estimator", str(path),
              "--trace", str(out / "t.png")], inputs, out, ["--trace applies to --method likelihood"])

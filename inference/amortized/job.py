@@ -30,11 +30,12 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
                     post_budget: float | None = None, ratio_budget: float | None = None,
                     sim_budget: float | None = None,
                     sbc_truths: int = 300, sbc_mcmc_truths: int = 0, mcmc_settings=None, shard_size: int = 500,
-                    progress=None, log=print) -> AmortizedEstimator:
+                    command: str | None = None, progress=None, log=print) -> AmortizedEstimator:
     """The whole job (module doc); writes the estimator to ``out`` and returns it.
     post_budget, ratio_budget: training seconds of each network (default: the
     train_cfg's time budget); sim_budget: simulation seconds (training then uses the
-    drones simulated by then)."""
+    drones simulated by then); command: the command line that ran the job (kept in the
+    file, so anyone can train it again)."""
     import torch
 
     t0 = time.perf_counter()
@@ -62,7 +63,7 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
         log(f"  {name}: {tl.epochs} epochs, best validation loss {tl.best_val:.4f} at epoch {tl.best_epoch} "
             f"({tl.stopped}), {tl.seconds:.0f} s")
     del x
-    est.meta.update(n_simulations=int(len(u)), seed=int(seed), simulation_seconds=t_sim,
+    est.meta.update(n_simulations=int(len(u)), seed=int(seed), simulation_seconds=t_sim, command=command,
                     training={"config": train_cfg.to_dict(), "device": str(dev), **logs}, sbc={})
     est.save(out)  # usable now; rewritten with its SBC figures below
     if sbc_truths:

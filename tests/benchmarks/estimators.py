@@ -52,7 +52,11 @@ def one(cls: str, ramps: int, n: int, workers: int, out: str, work: str, device:
     est = train_estimator(spec, n, os.path.join(work, name), os.path.join(out, f"{name}.zip"), seed=seed,
                           workers=workers, device=device, net_cfg=default_nets(cls),
                           train_cfg=cfg, sim_budget=sim_budget, post_budget=post_budget, ratio_budget=ratio_budget,
-                          sbc_truths=sbc_truths, shard_size=shard_size, progress=False, log=log)
+                          sbc_truths=sbc_truths, shard_size=shard_size, progress=False, log=log,
+                          command=f"python tests/benchmarks/estimators.py --jobs {cls}:{ramps}:{n}:{workers} "
+                                  f"--device {device} --sim-budget {sim_budget} --posterior-budget {post_budget} "
+                                  f"--ratio-budget {ratio_budget} --sbc-truths {sbc_truths} --seed {seed} "
+                                  f"--shard-size {shard_size}")
     log(f"done: {est.meta['job_seconds']:.0f} s")
 
 
