@@ -336,3 +336,19 @@ def test_calibrate_refuses_a_trace_of_the_amortized_route_before_any_work(tiny, 
     good = _profile_file(inputs / "good.npz", y[0][:3])
     refused(["calibrate", str(good), "--class", "HELI", "--out", str(out / "p.nc"), "--estimator", str(path),
              "--trace", str(out / "t.png")], inputs, out, ["--trace applies to --method likelihood"])
+
+
+def test_out_of_range_is_judged_against_the_estimators_own_drones():
+    """QUAD keeps about a quarter of its draws inside the prior on its own simulated
+    drones: that share is typical there, not a sign of foreign data; a tenth of it is."""
+    from mdaug.inference.amortized.calibrate import _out_of_range
+
+    ref = load_reference("HELI")
+    lf = LabelFree(1, Priors.from_reference(ref), ref.to_array())
+    x = np.repeat(ref.to_array()[None], 10, axis=0)
+    assert _out_of_range(lf, x, None, 0.22, 0.22) == (False, "")
+    flagged, why = _out_of_range(lf, x, None, 0.03, 0.22)
+    assert flagged and "3%" in why and "22%" in why
+    far = x.copy()
+    far[:, 2] *= 2.0  # w_a doubled in the other route: the two disagree on lines
+    assert _out_of_range(lf, x, far, 0.7, 0.7)[0]

@@ -9,7 +9,8 @@ truths and it needs no chain); the other lands in the group ``other_route`` besi
 it, with its diagnostics in the metadata. Both are in the class-vector variables of
 every mdaug posterior (Gamma, A_a, ..., C_m per engine, phases marginalised).
 
-Out of range: when the amortized posterior leaks (few draws inside the prior) or the
+Out of range: when the amortized posterior leaks (under half the share of draws inside
+the prior that it keeps on its own SBC drones) or the
 two routes disagree (the emcee medians outside the amortized 98% intervals for a
 quarter of the quantities or more), the measurements are unlike the training set:
 the result says so (``diagnostics['out_of_range']``) and ``calibrate`` warns.
@@ -32,7 +33,7 @@ from ..result import FORMAT, IDENTIFIED_RATIO, CalibrationResult, import_arviz
 from .shipped import find
 
 ROUTES = ("amortized", "emcee")
-LEAK_LIMIT = 0.5  # draws inside the prior below this share: out of range
+LEAK_FACTOR = 0.5  # draws inside the prior below this share of the estimator's own SBC drones': out of range
 DISAGREE_LIMIT = 0.25  # share of quantities whose emcee median leaves the amortized 98% interval
 
 
@@ -86,7 +87,8 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
         diag.update({k: diag["emcee"][k] for k in ("n_walkers", "steps_over_tau", "ess_min", "acceptance_mean",
                                                     "tau_max")}, chain_steps=diag["emcee"]["steps"])
     diag["seconds"] = time.perf_counter() - t0
-    diag["out_of_range"], diag["out_of_range_why"] = _out_of_range(lf, x_amortized, x_emcee, inside)
+    typical = est.meta.get("sbc", {}).get("amortized", {}).get("inside_prior_share", 1.0)
+    diag["out_of_range"], diag["out_of_range_why"] = _out_of_range(lf, x_amortized, x_emcee, inside, typical)
     chosen = x_amortized if route == "amortized" else x_emcee
     if route == "amortized":
         diag.update(converged=True, reason="amortized posterior: exact draws from the trained estimator "
@@ -128,10 +130,11 @@ def _rhat(run, names) -> float:
     return float(np.nanmax(r["x"].values))
 
 
-def _out_of_range(lf, x_amortized, x_emcee, inside: float) -> tuple[bool, str]:
-    if inside < LEAK_LIMIT:
-        return True, (f"only {inside:.0%} of the amortized posterior's draws fall inside the prior: the measurements "
-                      "are unlike the estimator's training set")
+def _out_of_range(lf, x_amortized, x_emcee, inside: float, typical: float) -> tuple[bool, str]:
+    """typical: the share of draws inside the prior on the estimator's own SBC drones."""
+    if inside < LEAK_FACTOR * typical:
+        return True, (f"only {inside:.0%} of the amortized posterior's draws fall inside the prior (on simulated "
+                      f"drones {typical:.0%}): the measurements are unlike the estimator's training set")
     if x_emcee is None:
         return False, ""
     qa, qe = lf.quantities(x_amortized), lf.quantities(x_emcee)
