@@ -11,7 +11,7 @@ name to how it makes its training set, used by the study (:mod:`mdaug.reports.jo
 * ``posterior_specimens``: posterior draws widened by the specimen model (its setting
   ``width``; width 0 = the posterior itself);
 * ``population``: new drones from the class's calibrated population (a population
-  file per class in ``spec.posteriors``; :mod:`mdaug.inference.population`);
+  file per class in ``spec.posteriors``; :mod:`mdaug.inference.population.model`);
 * ``tsaug``: tsaug on the measured profiles (:mod:`mdaug.classify.tsaug_baseline`).
 
 A strategy at one setting is a :class:`TrainingSpec` (frozen). A row of the table is
@@ -107,7 +107,7 @@ class Strategy:
 
     def load(self, path, cls: str):
         """A class's calibration file (a posterior NetCDF)."""
-        from .inference.posterior_augment import load_posterior
+        from .inference.result.augment import load_posterior
 
         return load_posterior(path, cls)
 
@@ -168,22 +168,22 @@ class PosteriorDraws(Strategy):
     """Draws from the calibrated posterior (:class:`~mdaug.inference.PosteriorSource`)."""
 
     def vectors(self, spec, cls, calibration):
-        from .inference.posterior_augment import PosteriorSource
+        from .inference.result.augment import PosteriorSource
 
         return PosteriorSource(calibration, label=cls)
 
 
 class PopulationDraws(Strategy):
     """New drones drawn from the class's calibrated population (a population file per
-    class, :class:`~mdaug.inference.population_augment.PopulationSource`)."""
+    class, :class:`~mdaug.inference.population.augment.PopulationSource`)."""
 
     def vectors(self, spec, cls, calibration):
-        from .inference.population_augment import PopulationSource
+        from .inference.population.augment import PopulationSource
 
         return PopulationSource(calibration, label=cls)
 
     def load(self, path, cls: str):
-        from .inference.population_augment import load_population
+        from .inference.population.augment import load_population
 
         return load_population(path, cls)
 

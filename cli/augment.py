@@ -34,7 +34,7 @@ def augmenters_from_args(args) -> tuple[list, dict | None, list[str]]:
     :mod:`mdaug.strategies`: ``--classes`` is sigma_p_published, ``--fit`` sigma_p_fit,
     ``--posterior`` posterior), the settings they add to the file, and the warnings to
     print once every check has passed."""
-    from ..inference.posterior_augment import load_posterior
+    from ..inference.result.augment import load_posterior
     from ..strategies import STRATEGIES, TrainingSpec, augmenter
 
     fits, posts, pops = args.fit or [], args.posterior or [], args.population or []

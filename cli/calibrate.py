@@ -227,9 +227,9 @@ def run_population(args, profiles, drones, settings, acquisition) -> int:
     import numpy as np
 
     from ..inference.calibrate import calibrate
-    from ..inference.likelihood import prepare_measured
-    from ..inference.population_result import calibrate_population
-    from ..inference.result import CalibrationResult
+    from ..inference.likelihood.base import prepare_measured
+    from ..inference.population.result import calibrate_population
+    from ..inference.result.posterior import CalibrationResult
     from ..radar import RadarConfig
     from ..radar.seeds import child_seed
 

@@ -38,7 +38,7 @@ How it is computed (:func:`line_sums`, compiled with numba):
 
 What :func:`line_sums` returns per bin is everything the moments need that does
 not depend on the steady line's amplitude, so a caller can vary that (and its
-phase) without recomputing the pair sums (:mod:`mdaug.inference.closed_form`).
+phase) without recomputing the pair sums (:mod:`mdaug.inference.likelihood.closed_form`).
 """
 from __future__ import annotations
 

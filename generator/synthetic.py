@@ -5,7 +5,7 @@ randomises (phases, MTI residual, carrier-return phase, sub-bin range, yaw,
 noise) by simulation: for a class vector it renders O acquisitions of I ramps
 each, always with the same random draws (common random numbers, so the result is
 a smooth function of the vector), and the likelihood is a Gaussian whose mean and
-covariance are those of the rendered profiles (:mod:`mdaug.inference.synthetic`).
+covariance are those of the rendered profiles (:mod:`mdaug.inference.likelihood.synthetic`).
 
 What is drawn here follows :func:`~.acquisition.draw_acquisitions` term by term
 (tested equal to :func:`~.acquisition.ramp_signals` on the same draws), with two

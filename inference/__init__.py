@@ -7,15 +7,16 @@ corner and trace plots, posterior augmentation, the population of drones.
 Imports :mod:`mdaug.generator` and :mod:`mdaug.radar` only.
 """
 from .calibrate import calibrate
-from .closed_form import ClosedFormLikelihood
-from .likelihood import LogPosterior, prepare_measured
-from .posterior_augment import PosteriorAugmenter, PosteriorSource
-from .layout import Layout
-from .line_layout import LineLayout
-from .priors import Priors
-from .result import CalibrationResult
+from .likelihood.closed_form import ClosedFormLikelihood
+from .likelihood.base import prepare_measured
+from .likelihood.fitted_phases import LogPosterior
+from .result.augment import PosteriorAugmenter, PosteriorSource
+from .space.layout import Layout
+from .space.line_layout import LineLayout
+from .space.priors import Priors
+from .result.posterior import CalibrationResult
 from .settings import CalibrationSettings
-from .synthetic import SyntheticLikelihood
+from .likelihood.synthetic import SyntheticLikelihood
 
 __all__ = ["CalibrationResult", "CalibrationSettings", "ClosedFormLikelihood", "Layout", "LineLayout", "LogPosterior", "PosteriorAugmenter", "PosteriorSource", "SyntheticLikelihood", "Priors",
            "calibrate", "prepare_measured"]

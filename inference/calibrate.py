@@ -27,17 +27,18 @@ from ..generator.acquisition import Acquisition
 from ..generator.magnitude import carrier_line_factor
 from ..radar import RadarConfig, atomic_write
 from ..radar.seeds import seed_sequence
-from .ensemble import fingerprint
+from .samplers.toolbox import fingerprint
 from .fit import FitResult, global_fit
-from .closed_form import ClosedFormLikelihood
-from .layout import DEFAULT_STEADY, Layout
-from .line_layout import LineLayout
-from .likelihood import LogPosterior, prepare_measured
-from .priors import PHASE_NAMES, SHARED, Priors
-from .result import FORMAT, IDENTIFIED_RATIO, CalibrationResult, import_arviz
+from .likelihood.closed_form import ClosedFormLikelihood
+from .space.layout import DEFAULT_STEADY, Layout
+from .space.line_layout import LineLayout
+from .likelihood.base import prepare_measured
+from .likelihood.fitted_phases import LogPosterior
+from .space.priors import PHASE_NAMES, SHARED, Priors
+from .result.posterior import FORMAT, IDENTIFIED_RATIO, CalibrationResult, import_arviz
 from .samplers import SamplerRun, get_sampler
 from .settings import CalibrationSettings
-from .synthetic import SyntheticLikelihood
+from .likelihood.synthetic import SyntheticLikelihood
 
 MAX_DRAWS = 4000  # posterior draws kept (thinned further when the chain holds more)
 TRACE_STEPS = 400  # steps kept in the trace group

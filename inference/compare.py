@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .result import CalibrationResult, import_arviz
+from .result.posterior import CalibrationResult, import_arviz
 
 DSE_RULE = 2.0
 

@@ -25,7 +25,7 @@ import numpy as np
 from ..radar.progress import progress_bar
 from ..radar.seeds import rng as seeded_rng
 
-from .likelihood import LogPosterior
+from .likelihood.fitted_phases import LogPosterior
 
 AGREE_MISFIT = 2.0  # nats: starts within this of the best fit "reach the same height"
 RIVAL_MISFIT = 10.0  # nats: a distant start within this of the best is a rival mode (multimodal)

@@ -58,8 +58,8 @@ def calibrate_class(job: dict) -> dict:
     from pathlib import Path
 
     from ..inference import calibrate
-    from ..inference.population_result import calibrate_population
-    from ..inference.priors import engine_lines
+    from ..inference.population.result import calibrate_population
+    from ..inference.space.priors import engine_lines
     from ..radar.seeds import child_seed
     from .style import figure_style
 

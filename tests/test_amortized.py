@@ -14,7 +14,7 @@ from mdaug.inference.amortized.estimator import AmortizedEstimator, EstimatorErr
 from mdaug.inference.amortized.nets import NetConfig  # noqa: E402
 from mdaug.inference.amortized.simulate import SimulationSpec, simulate  # noqa: E402
 from mdaug.inference.amortized.target import DroneSpace, LabelFree  # noqa: E402
-from mdaug.inference.priors import Priors, engine_lines  # noqa: E402
+from mdaug.inference.space.priors import Priors, engine_lines  # noqa: E402
 
 TINY = NetConfig(channels=(2, 4, 4, 4), trial_out=8, set_hidden=16, set_out=8, flow_hidden=16, flow_transforms=2,
                  ratio_hidden=16)

@@ -302,7 +302,7 @@ def test_old_part_files_without_a_pid_expire(tmp_path):
 def test_the_posterior_netcdf_gets_the_usual_file_mode(tmp_path):
     import arviz as az
 
-    from mdaug.inference.result import CalibrationResult
+    from mdaug.inference.result.posterior import CalibrationResult
 
     res = object.__new__(CalibrationResult)
     res.idata = az.from_dict(posterior={"x": np.zeros((1, 5))})

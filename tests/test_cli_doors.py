@@ -28,8 +28,8 @@ def _population():
     anything: only the reader is tested)."""
     from mdaug.generator import load_reference
     from mdaug.generator.acquisition import Acquisition
-    from mdaug.inference.population import SPREADS, Hyperprior, PopulationModel
-    from mdaug.inference.priors import Priors
+    from mdaug.inference.population.model import SPREADS, Hyperprior, PopulationModel
+    from mdaug.inference.space.priors import Priors
 
     ref = load_reference("HELI")
     model, x0 = PopulationModel(1), ref.to_array()
@@ -253,7 +253,7 @@ def test_refused(case, root, refused):
 
 
 def test_the_good_population_still_loads(root):
-    from mdaug.inference.population_result import PopulationResult
+    from mdaug.inference.population.result import PopulationResult
 
     pop = PopulationResult.load(root / "in" / "pop.npz", class_name="HELI")
     assert pop.n_drones == 2 and pop.draw_drones(3, 0).shape == (3, 13)

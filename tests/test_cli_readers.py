@@ -9,7 +9,6 @@ bar through the chain."""
 import errno
 import json
 import shutil
-import warnings
 import zipfile
 
 import numpy as np
@@ -227,7 +226,7 @@ def test_almost_right_file(case, d, tmp_path, refused):
 
 def test_the_good_posterior_and_model_still_load(d):
     from mdaug.classify.persist import load_model
-    from mdaug.inference.result import CalibrationResult
+    from mdaug.inference.result.posterior import CalibrationResult
 
     assert CalibrationResult.load(d / "post.nc", class_name="HELI").n_draws > 0
     assert load_model(d / "nb.zip").classes_.tolist() == ["HELI", "QUAD"]
@@ -369,7 +368,7 @@ def test_sweep_says_its_pick_peeks_and_chooses_on_a_selection_set(d, tmp_path, c
 
 
 def test_calibrate_summary_has_units(tiny_posterior):
-    from mdaug.inference.result import CalibrationResult
+    from mdaug.inference.result.posterior import CalibrationResult
 
     report = CalibrationResult.load(tiny_posterior).report()
     rows = {ln.split()[0]: ln.split()[1] for ln in report.splitlines() if ln[:1].isalpha() and "[0]" in ln.split()[0]}

@@ -11,11 +11,11 @@ from mdaug.generator.line_moments import line_sums
 from mdaug.generator.line_tables import line_vectors
 from mdaug.generator.magnitude import magnitude_moments
 from mdaug.generator.model import spectra
-from mdaug.inference.closed_form import ClosedFormLikelihood
-from mdaug.inference.layout import DEFAULT_STEADY, Layout
-from mdaug.inference.likelihood import prepare_measured
-from mdaug.inference.line_layout import LineLayout
-from mdaug.inference.priors import Priors, engine_lines
+from mdaug.inference.likelihood.closed_form import ClosedFormLikelihood
+from mdaug.inference.space.layout import DEFAULT_STEADY, Layout
+from mdaug.inference.likelihood.base import prepare_measured
+from mdaug.inference.space.line_layout import LineLayout
+from mdaug.inference.space.priors import Priors, engine_lines
 from mdaug.radar import RadarConfig
 
 RADAR = RadarConfig()

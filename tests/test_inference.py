@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mdaug.generator import IDX, N_PARAMS, load_reference, profiles
-from mdaug.inference.base import LogPosteriorBase
+from mdaug.inference.likelihood.base import LogPosteriorBase
 from mdaug.inference import (CalibrationResult, CalibrationSettings, Layout, LogPosterior, PosteriorAugmenter,
                              Priors, calibrate, prepare_measured)
 from mdaug.inference.fit import global_fit
@@ -56,7 +56,7 @@ def test_layout_round_trip_and_mirror_symmetry(rng):
 
 @pytest.mark.parametrize("cls,engines,meas", [("HELI", 1, 1), ("HELI", 1, 2), ("QUAD", 4, 1)])
 def test_relabelling_the_lines_is_an_exact_symmetry(cls, engines, meas, rng):
-    from mdaug.inference.priors import PERMUTATIONS
+    from mdaug.inference.space.priors import PERMUTATIONS
 
     ref = load_reference(cls)
     lay = Layout(engines, meas, Priors.from_reference(ref))
@@ -234,7 +234,7 @@ def test_recovery_of_the_lines_from_five_scene_acquisitions():
     from mdaug.generator.acquisition import Acquisition
     from mdaug.generator.chain import SceneConfig, simulate_campaign
     from mdaug.inference.amortized.calibrate import calibrate_amortized
-    from mdaug.inference.priors import engine_lines
+    from mdaug.inference.space.priors import engine_lines
 
     camp = simulate_campaign("HELI", 1, 5, 11, scene=SceneConfig(n_ramps=32, specimen_spread=0.0))
     res = calibrate_amortized(camp.profiles, "HELI", acquisition=Acquisition.measured(32), emcee=False,

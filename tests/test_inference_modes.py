@@ -1,4 +1,4 @@
-"""Mode jumps of the SMC sampler (mdaug.inference.modes): the mixture's density is
+"""Mode jumps of the SMC sampler (mdaug.inference.samplers.modes): the mixture's density is
 exact on the circle, the Laplace covariance is right on a quadratic, jumps give a
 mode no other move can reach its posterior weight, and the mode finder polishes
 to optima and keeps its state (the resume test with jumps is in
@@ -8,9 +8,10 @@ import pytest
 from scipy.special import logsumexp
 
 from mdaug.generator import load_reference, profiles
-from mdaug.inference.likelihood import LogPosterior
-from mdaug.inference.modes import ModeFinder, ModeMixture, cap_cov, laplace_cov, loglik_hessian
-from mdaug.inference.tempering import run_smc
+from mdaug.inference.likelihood.fitted_phases import LogPosterior
+from mdaug.inference.samplers.modes import ModeFinder, ModeMixture, cap_cov, laplace_cov
+from mdaug.inference.samplers.toolbox import hessian
+from mdaug.inference.samplers.tempering import run_smc
 
 
 def test_mixture_density_is_normalised_on_the_circle_and_matches_its_draws():
@@ -34,7 +35,7 @@ def test_hessian_and_laplace_covariance_of_a_quadratic():
     cov = np.array([[2.0, 0.5, 0.0], [0.5, 1.0, 0.0], [0.0, 0.0, 1e6]])  # third direction ~flat
     prec = np.linalg.inv(cov)
     loglik = lambda th: -0.5 * np.einsum("ni,ij,nj->n", th, prec, th)  # noqa: E731
-    h = loglik_hessian(loglik, np.zeros(3), np.array([0.1, 0.1, 0.1]))
+    h = hessian(loglik, np.zeros(3), np.array([0.1, 0.1, 0.1]))
     np.testing.assert_allclose(h, -prec, atol=1e-8)
     got = laplace_cov(h, np.ones(3), max_sd=np.array([10.0, 10.0, 5.0]))
     np.testing.assert_allclose(got[:2, :2], cov[:2, :2], rtol=1e-6)
@@ -100,9 +101,9 @@ def heli_profile():
 
 
 def test_mode_finder_polishes_to_optima_and_keeps_its_state(heli_profile):
-    from mdaug.inference.likelihood import prepare_measured
-    from mdaug.inference.layout import Layout
-    from mdaug.inference.priors import Priors
+    from mdaug.inference.likelihood.base import prepare_measured
+    from mdaug.inference.space.layout import Layout
+    from mdaug.inference.space.priors import Priors
     from mdaug.radar import RadarConfig
 
     heli = load_reference("HELI")

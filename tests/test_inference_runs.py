@@ -188,7 +188,7 @@ def test_sbc_machinery_on_scene_simulated_measurements():
     acquisitions each through the scene simulator and the chain, the marginal
     likelihood): the ranks and statistics are well formed. Whether they are uniform
     is the slow SBC below and the benchmark (tests/benchmarks/inference.py)."""
-    from mdaug.inference.sbc import run_sbc, sbc_quantities
+    from mdaug.inference.diagnostics.sbc import run_sbc, sbc_quantities
 
     q, names = sbc_quantities(HELI.to_array())
     assert q.shape == (1, 8) and names[0] == "line 1 w[0]"

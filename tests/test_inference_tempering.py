@@ -1,4 +1,4 @@
-"""Tempered SMC sampler (mdaug.inference.tempering): bimodal toy targets with known
+"""Tempered SMC sampler (mdaug.inference.samplers.tempering): bimodal toy targets with known
 mode weights and evidence, phases on the circle, resume, and the calibrate path."""
 import warnings
 
@@ -8,7 +8,8 @@ from scipy.special import i0e, logsumexp
 
 from mdaug.generator import load_reference, profiles
 from mdaug.inference import CalibrationResult, CalibrationSettings, calibrate
-from mdaug.inference.tempering import next_beta, run_smc, systematic_resample
+from mdaug.inference.samplers.tempering import next_beta, run_smc
+from mdaug.inference.samplers.toolbox import systematic_resample
 
 BOX = 10.0
 WEIGHTS = np.array([0.3, 0.7])

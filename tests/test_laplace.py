@@ -4,7 +4,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from mdaug.inference.laplace import LaplaceSampler, hessian, systematic_resample
+from mdaug.inference.samplers.laplace import LaplaceSampler
+from mdaug.inference.samplers.toolbox import hessian, systematic_resample
 from mdaug.inference.samplers import get_sampler
 
 

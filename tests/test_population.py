@@ -5,9 +5,9 @@ import pytest
 
 from mdaug.generator import load_reference
 from mdaug.generator.specimens import SpecimenSpread
-from mdaug.inference.population import (SPREADS, DroneSummary, Hyperprior, PopulationModel, log_marginal,
+from mdaug.inference.population.model import (SPREADS, DroneSummary, Hyperprior, PopulationModel, log_marginal,
                                         sample_spreads)
-from mdaug.inference.population_result import PopulationResult
+from mdaug.inference.population.result import PopulationResult
 from mdaug.radar.io import DataFileError
 
 
@@ -90,7 +90,7 @@ def _result(model, x0, n_drones=3, seed=3):
     fit = sample_spreads(drones, model, Hyperprior(), rng, max_steps=3000)
     from mdaug.generator.acquisition import Acquisition
     pool = np.concatenate([d.draws for d in drones])
-    from mdaug.inference.priors import Priors
+    from mdaug.inference.space.priors import Priors
     meta = {"format": "mdaug-population-1", "class_name": "HELI", "n_engines": 1, "gamma0": float(x0[0]),
             "priors": Priors.from_reference(load_reference("HELI")).to_dict(),
             "specimens": [d.specimen for d in drones], "hyperprior": Hyperprior().scales, "coords": model.names,
@@ -155,7 +155,7 @@ def test_population_sbc_runs_and_resumes(tmp_path):
     cheap calibrations): ranks of the 5 spreads and the unseen drone's lines within
     0..n_rank, and a rerun on the checkpoint does no new work."""
     from mdaug.inference import CalibrationSettings
-    from mdaug.inference.population_sbc import run_population_sbc
+    from mdaug.inference.diagnostics.population_sbc import run_population_sbc
 
     settings = CalibrationSettings(sampler="laplace", n_starts=1, fit_budget=200, polish_budget=100,
                                    n_particles=300, progress=False)

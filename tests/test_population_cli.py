@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mdaug.cli import main
-from mdaug.inference.population_result import PopulationResult
+from mdaug.inference.population.result import PopulationResult
 
 FAST = ["--sampler", "laplace", "--starts", "1", "--fit-budget", "60", "--particles", "200", "--allow-unconverged"]
 
@@ -28,7 +28,7 @@ def test_calibrate_population_keeps_each_drone_and_reuses_it(drones, capsys):
     assert "population of HELI: 2 drone(s) (0, 1)" in text
     pop = PopulationResult.load(out, class_name="HELI")
     assert pop.n_drones == 2 and not pop.assumed
-    from mdaug.inference.result import CalibrationResult
+    from mdaug.inference.result.posterior import CalibrationResult
     assert CalibrationResult.load(drones / "pop.npz.drone-1.nc").specimens == ["1"]
     assert main(["calibrate", str(drones / "d.npz"), "--class", "HELI", "--population", *FAST,
                  "--out", str(out)]) == 0
@@ -49,7 +49,7 @@ def test_one_drone_is_calibrated_alone_with_specimen(drones, capsys):
     assert main(["calibrate", str(drones / "d.npz"), "--class", "HELI", "--specimen", "1", *FAST,
                  "--out", str(out)]) == 0
     assert "calibrating HELI from 2 profile(s)" in capsys.readouterr().out
-    from mdaug.inference.result import CalibrationResult
+    from mdaug.inference.result.posterior import CalibrationResult
     assert CalibrationResult.load(out).specimens == ["1"]
 
 

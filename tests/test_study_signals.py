@@ -83,7 +83,7 @@ def test_sigterm_wrapped_by_a_sampler_still_reads_as_terminated(monkeypatch, cap
     raised from the Terminated): the command still ends with 'terminated' and 143; a
     plain Ctrl-C with 'interrupted' and 130."""
     import mdaug.cli as cli
-    from mdaug.inference.sampler_run import CalibrationInterrupted
+    from mdaug.inference.samplers.base import CalibrationInterrupted
     from mdaug.radar.workers import Terminated
 
     def wrapped(args):

@@ -27,9 +27,9 @@ from ...generator import IDX, load_reference
 from ...generator.acquisition import Acquisition
 from ...radar import RadarConfig
 from ...radar.seeds import child_seed, seed_sequence
-from ..likelihood import prepare_measured
-from ..priors import SHARED
-from ..result import FORMAT, IDENTIFIED_RATIO, CalibrationResult, import_arviz
+from ..likelihood.base import prepare_measured
+from ..space.priors import SHARED
+from ..result.posterior import FORMAT, IDENTIFIED_RATIO, CalibrationResult, import_arviz
 from .shipped import find
 
 ROUTES = ("amortized", "emcee")

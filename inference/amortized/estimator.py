@@ -21,7 +21,7 @@ import torch
 from ...generator.acquisition import Acquisition
 from ...radar import RadarConfig
 from ...radar.io import atomic_write
-from ..priors import Priors
+from ..space.priors import Priors
 from .nets import NetConfig, RatioNet, posterior_net
 from .simulate import SIMULATOR, SimulationSpec, spec_from_dict
 from .target import LabelFree

@@ -11,7 +11,7 @@ labelling symmetry and no walls but the prior's support, so the chain mixes.
 Starts come from amortized draws: nlopt (a local derivative-free polish, BOBYQA in a
 box around the draws) from the best of them, emcee's walkers from others; the
 sampler is the calibration's one emcee driver
-(:func:`mdaug.inference.ensemble.run_ensemble`: DE moves, 50 tau with tau stable, time
+(:func:`mdaug.inference.samplers.emcee_run.run_ensemble`: DE moves, 50 tau with tau stable, time
 budget, Ctrl-C), so the same convergence rule applies. A share of its moves proposes
 from the amortized posterior (independence Metropolis-Hastings, :data:`P_PROPOSAL`):
 the target is unchanged, and where the two posteriors agree the chain mixes in a
@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...radar.seeds import seed_sequence
-from ..ensemble import run_ensemble
-from ..sampler_run import SamplerRun
+from ..samplers.emcee_run import run_ensemble
+from ..samplers.base import SamplerRun
 
 
 @dataclass

@@ -27,8 +27,8 @@ from ...radar.io import atomic_savez
 from ...radar.seeds import rng as seeded_rng
 from ...radar.seeds import seed_sequence
 from ...radar.version import package_version
-from ..likelihood import prepare_measured
-from ..priors import Priors
+from ..likelihood.base import prepare_measured
+from ..space.priors import Priors
 from .target import DroneSpace
 
 SIMULATOR = "scene+chain-1"

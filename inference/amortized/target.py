@@ -1,9 +1,9 @@
 """What the measurements identify, and the space the networks and samplers work in.
 
-A drone's physics (the shared block of a :class:`~mdaug.inference.layout.Layout`: per
+A drone's physics (the shared block of a :class:`~mdaug.inference.space.layout.Layout`: per
 engine ``A_a, A_b, A_p, A_m, w_a, w_b, C_p, C_m`` and Gamma ratios) is seen by a
 profile only through its vibration lines: which line is the roll, the pitch or a
-mixing term is a labelling that no profile fixes (:mod:`mdaug.inference.priors`).
+mixing term is a labelling that no profile fixes (:mod:`mdaug.inference.space.priors`).
 The label-free quantities ``q`` are, per engine (engines sorted by their lowest
 line), the four line frequencies sorted (rad/s) and their amplitudes (m) in the same
 order, and for engines k >= 1 ``lnG`` = ln(Gamma_k / Gamma_0). The networks see them
@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from ...generator import IDX, N_PARAMS
-from ..layout import Layout
-from ..priors import PERMUTATIONS, Priors, align_lines, engine_lines
+from ..space.layout import Layout
+from ..space.priors import PERMUTATIONS, Priors, align_lines, engine_lines
 
 _PERMS = np.asarray(PERMUTATIONS)
 _EPS = 1e-9

@@ -146,7 +146,7 @@ def section_closed_form(quick):
     tightest setting, and the model mean's largest change, peak = 1)."""
     from mdaug.generator.acquisition import Acquisition, render
     from mdaug.inference.calibrate import make_likelihood
-    from mdaug.inference.closed_form import ClosedFormLikelihood
+    from mdaug.inference.likelihood.closed_form import ClosedFormLikelihood
 
     k = OPTIONS["ramps"]
     reps = 2 if quick else 5
@@ -185,7 +185,7 @@ def section_closed_form(quick):
 
 
 def _recovery(res, cls):
-    from mdaug.inference.priors import engine_lines
+    from mdaug.inference.space.priors import engine_lines
 
     w_true = np.sort(engine_lines(load_reference(cls).to_array().reshape(-1, 13))[0], axis=-1)
     lo, hi = np.quantile(res.lines()[..., 0], [0.05, 0.95], axis=0)
@@ -227,7 +227,7 @@ def section_quad(quick):
 
 
 def section_sbc(quick):
-    from mdaug.inference.sbc import run_sbc
+    from mdaug.inference.diagnostics.sbc import run_sbc
 
     n, k = (2 if quick else OPTIONS["sbc_draws"]), OPTIONS["sbc_ramps"]
     steps = 200 if quick else OPTIONS["sbc_steps"]

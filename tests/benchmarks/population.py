@@ -36,7 +36,7 @@ def settings_from(args) -> CalibrationSettings:
 def section_cost(args):
     from mdaug.generator.chain import SceneConfig, simulate_campaign
     from mdaug.inference.calibrate import calibrate
-    from mdaug.inference.population_result import calibrate_population
+    from mdaug.inference.population.result import calibrate_population
 
     print(f"\n== 1. cost of one {args.cls} population: {args.drones} drones x {args.acquisitions} acquisitions, "
           f"K = {args.ramps}, sampler {args.sampler}")
@@ -61,7 +61,7 @@ def section_cost(args):
 
 
 def section_sbc(args):
-    from mdaug.inference.population_sbc import run_population_sbc
+    from mdaug.inference.diagnostics.population_sbc import run_population_sbc
 
     print(f"\n== 2. population SBC ({args.cls}): {args.replicates} populations of {args.drones} drones x "
           f"{args.acquisitions} acquisitions, K = {args.ramps}, sampler {args.sampler}; {args.workers} worker(s); "

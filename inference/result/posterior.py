@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..generator import IDX, N_PARAMS, PARAM_NAMES
-from ..generator.model import wrap_phase
-from .priors import PHASE_NAMES, SHARED, Priors, engine_lines
+from ...generator import IDX, N_PARAMS, PARAM_NAMES
+from ...generator.model import wrap_phase
+from ..space.priors import PHASE_NAMES, SHARED, Priors, engine_lines
 
 FORMAT = "mdaug-posterior-2"
 READABLE_FORMATS = ("mdaug-posterior-1", FORMAT)
@@ -170,7 +170,7 @@ class CalibrationResult:
     def acquisition(self):
         """The :class:`~mdaug.generator.acquisition.Acquisition` the measurements were
         modelled with (the published single chirp for files that predate it)."""
-        from ..generator.acquisition import Acquisition
+        from ...generator.acquisition import Acquisition
 
         return Acquisition.from_dict(self.meta.get("acquisition") or {}, "posterior attribute 'acquisition'")
 
@@ -306,7 +306,7 @@ class CalibrationResult:
 
     def report(self) -> str:
         """Human-readable fit, convergence and posterior summary (:func:`.result_report.report`)."""
-        from .result_report import amortized_report, report
+        from .report import amortized_report, report
 
         return (amortized_report if self.amortized else report)(self, IDENTIFIED_RATIO)
 
@@ -328,13 +328,13 @@ class CalibrationResult:
 
     def plot_corner(self, path, max_params: int = 24):
         """The corner plot (:func:`.result_plots.plot_corner`)."""
-        from .result_plots import plot_corner
+        from .plots import plot_corner
 
         return plot_corner(self, path, max_params)
 
     def plot_trace(self, path):
         """The trace plot (:func:`.result_plots.plot_trace`)."""
-        from .result_plots import plot_trace
+        from .plots import plot_trace
 
         return plot_trace(self, path)
 
@@ -342,7 +342,7 @@ class CalibrationResult:
     def save(self, path) -> Path:
         """Write NetCDF atomically (a temporary file in the same folder, then rename),
         with the usual file mode (0666 minus the umask), like every other output."""
-        from ..radar.io import atomic_path
+        from ...radar.io import atomic_path
 
         path = Path(path)
         with atomic_path(path) as tmp, warnings.catch_warnings():
@@ -354,7 +354,7 @@ class CalibrationResult:
     def load(cls, path, *, class_name: str | None = None, n_engines: int | None = None) -> "CalibrationResult":
         """Read a posterior written by :meth:`save`; ``class_name`` / ``n_engines``
         check that it is the posterior expected (clear errors otherwise)."""
-        from ..radar import DataFileError
+        from ...radar import DataFileError
 
         path = Path(path)
         if path.is_dir():

@@ -15,12 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..generator.params import IDX, N_PARAMS
-from ..generator.specimens import SpecimenSpread
-from ..radar.io import DataFileError, atomic_savez
-from ..radar.npz import Field, check_field, read_arrays
-from ..radar.seeds import rng as as_rng
-from .population import SPREADS, Hyperprior, PopulationModel, sample_spreads, summarise_drone
+from ...generator.params import IDX, N_PARAMS
+from ...generator.specimens import SpecimenSpread
+from ...radar.io import DataFileError, atomic_savez
+from ...radar.npz import Field, check_field, read_arrays
+from ...radar.seeds import rng as as_rng
+from .model import SPREADS, Hyperprior, PopulationModel, sample_spreads, summarise_drone
 
 FORMAT = "mdaug-population-1"
 POOL_PER_DRONE = 1000  # posterior draws kept per drone (for coordinates no drone identifies)
@@ -47,7 +47,7 @@ def calibrate_population(results, specimens=None, *, reference=None, hyperprior:
     class vector whose labelling the drones are read in (default: the class
     reference); hyperprior: the spreads' prior (default :meth:`Hyperprior.stated`).
     """
-    from ..generator import load_reference
+    from ...generator import load_reference
 
     results = list(results)
     if not results:
@@ -121,7 +121,7 @@ class PopulationResult:
     def measured_acquisition(self):
         """The acquisition new drones are rendered under: the drones' own, with the union
         of the carrier and noise ranges their calibrations measured."""
-        from ..generator.acquisition import Acquisition
+        from ...generator.acquisition import Acquisition
 
         return Acquisition.from_dict(self.meta["acquisition"], "population attribute 'acquisition'")
 
@@ -170,7 +170,7 @@ class PopulationResult:
         """(n,) bool: class vectors x (n, 13E) inside the calibration prior's box (every
         amplitude, w_a, w_b, C and Gamma ratio; the box keeps every line below the
         profile window's edge)."""
-        from .priors import SHARED, Priors
+        from ..space.priors import SHARED, Priors
 
         pri = Priors.from_dict(self.meta["priors"])
         e = np.asarray(x).reshape(len(x), self.n_engines, N_PARAMS)
@@ -303,8 +303,8 @@ def _load_meta(path, raw) -> dict:
     if not (isinstance(d, dict) and isinstance(d.get("converged"), bool) and isinstance(d.get("steps"), int)
             and isinstance(d.get("tau"), list) and d["tau"] and all(isinstance(t, (int, float)) for t in d["tau"])):
         raise bad("diagnostics", "a table with converged (true/false), steps (an integer) and tau (numbers)")
-    from ..generator.acquisition import Acquisition
-    from .priors import Priors
+    from ...generator.acquisition import Acquisition
+    from ..space.priors import Priors
 
     for key, read in (("acquisition", lambda v: Acquisition.from_dict(v, "acquisition")), ("priors", Priors.from_dict)):
         try:

@@ -38,13 +38,13 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import logsumexp
 
-from ..generator import IDX, N_PARAMS, vibration_terms
-from ..generator.acquisition import Acquisition, noise_sigma
-from ..generator.line_moments import SUM_NAMES, line_sums
-from ..generator.magnitude import magnitude_moments
-from ..radar import RadarConfig
+from ...generator import IDX, N_PARAMS, vibration_terms
+from ...generator.acquisition import Acquisition, noise_sigma
+from ...generator.line_moments import SUM_NAMES, line_sums
+from ...generator.magnitude import magnitude_moments
+from ...radar import RadarConfig
 from .base import LogPosteriorBase, MarginalLikelihood
-from .layout import Layout
+from ..space.layout import Layout
 
 LOG_2PI = float(np.log(2 * np.pi))
 _S = {name: i for i, name in enumerate(SUM_NAMES)}
@@ -67,17 +67,10 @@ class ClosedFormLikelihood(MarginalLikelihood):
     def __init__(self, data: np.ndarray, layout: Layout, acquisition: Acquisition,
                  radar: RadarConfig = RadarConfig(), *, stride: int = 8, floor: float = 0.0, n_alpha: int = 8,
                  amp_tol: float = 1e-3, pair_tol: float = 0.05, reach_tol: float = 3e-4, coherent: bool = False):
-        if not layout.marginal:
-            raise ValueError("ClosedFormLikelihood needs a marginal Layout (Layout(..., marginal=True))")
-        self.data = np.asarray(data, dtype=np.float64)
-        if self.data.shape != (layout.M, radar.slice_length):
-            raise ValueError(f"data: expected shape ({layout.M}, {radar.slice_length}), got {self.data.shape}")
-        if int(stride) < 1:
-            raise ValueError(f"stride must be >= 1 bin, got {stride}")
+        self._take_data(data, layout, acquisition, radar, stride)
         if int(n_alpha) < 1:
             raise ValueError(f"n_alpha must be >= 1, got {n_alpha}")
-        self.layout, self.radar, self.acquisition = layout, radar, acquisition
-        self.stride, self.floor, self.n_alpha = int(stride), float(floor), int(n_alpha)
+        self.floor, self.n_alpha = float(floor), int(n_alpha)
         self.tol = dict(amp_tol=float(amp_tol), pair_tol=float(pair_tol), reach_tol=float(reach_tol),
                         coherent=bool(coherent))
         half = radar.slice_length // 2
@@ -91,14 +84,9 @@ class ClosedFormLikelihood(MarginalLikelihood):
         self.g1, self.g2 = (1.0 + 1.0 / n, 2.0 / n) if n else (1.0, 0.0)
         alpha = 2 * np.pi * np.arange(self.n_alpha) / self.n_alpha
         self._rot = np.exp(1j * alpha)  # (Q,)
-        self.n_calls = 0
         # the fit searches role space (a box where every point is a valid drone) and the
         # sampler line space; with a role-space layout both are the same
         self._role = layout.role_layout() if not layout.labelled else None
-
-    @property
-    def n_bins(self) -> int:
-        return self.y.shape[1]
 
     def settings(self) -> dict:
         return {"likelihood": self.kind, "acquisition": self.acquisition.to_dict(), "stride": self.stride,

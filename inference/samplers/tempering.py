@@ -50,9 +50,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..radar.seeds import rng as seeded_rng
-from ..generator.model import wrap_phase
-from .sampler_run import CalibrationInterrupted, SamplerRun, stop_on_sigint
+from ...radar.seeds import rng as seeded_rng
+from ...generator.model import wrap_phase
+from .base import CalibrationInterrupted, SamplerRun, stop_on_sigint
+from .toolbox import systematic_resample
 
 GAMMA_MIX = ((0.25, 0.5), (1.0, 0.4), (None, 0.1))  # (factor of 2.38/sqrt(2 dim) or None = 1.0, weight)
 JITTER = 1e-6  # relative Gaussian jitter of DE proposals (in units of the population sd)
@@ -101,13 +102,6 @@ def next_beta(log_lik: np.ndarray, beta: float, target_ess: float) -> float:
         else:
             hi = mid
     return max(lo, beta + 1e-12)
-
-
-def systematic_resample(w: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Indices (N,) by systematic resampling of normalised weights w (N,)."""
-    n = len(w)
-    u = (rng.uniform() + np.arange(n)) / n
-    return np.minimum(np.searchsorted(np.cumsum(w), u), n - 1)
 
 
 def de_sweep(theta, ll, lprior, beta, target, rng, phase_cols=(), bounds=None, p_redraw: float = 0.0,
@@ -195,7 +189,7 @@ def _check_checkpoint(path: Path, fp: str):
 
 
 def _save_checkpoint(path: Path, fp: str, rng, **arrays) -> None:
-    from ..radar import atomic_savez
+    from ...radar import atomic_savez
 
     atomic_savez(path, smc_fingerprint=np.array(fp), rng_state=np.array(json.dumps(rng.bit_generator.state)),
                  **{k: np.asarray(v) for k, v in arrays.items()})
@@ -254,7 +248,7 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
             raise ValueError("SMC: a prior draw has a non-finite log prior or log likelihood")
         betas, log_z, ess_h, acc_h, sw_h, n_evals, resumed_at = [0.0], 0.0, [], [], [], n_particles, 0
     n = theta.shape[0]
-    from ..radar.progress import progress_bar
+    from ...radar.progress import progress_bar
 
     bar = progress_bar(total=1000, initial=int(1000 * betas[-1]), desc="SMC (beta x 1000)", unit="",
                        progress=progress)

@@ -25,32 +25,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
-from ..generator.model import wrap_phase
+from ...generator.model import wrap_phase
+from .toolbox import curvature_scales, hessian
 
 DOF = 5.0  # Student-t degrees of freedom of a component (heavy tails cover a mode's skew)
 INFLATE = 1.5  # component scale over the Laplace scale
 MAX_MODES = 16
 SAME_MODE = 0.02  # optima closer than this (max |difference| / prior width) are one mode
-
-
-def loglik_hessian(loglik, theta: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """Hessian (dim, dim) of a smooth, vectorised log-likelihood at theta (dim,) by
-    central differences with steps ``scale`` (dim,), one batch of 2 dim^2 + 1 calls."""
-    d = theta.size
-    e = np.eye(d) * scale
-    pts = [theta]
-    for i in range(d):
-        pts += [theta + e[i], theta - e[i]]
-    pairs = [(i, j) for i in range(d) for j in range(i + 1, d)]
-    for i, j in pairs:
-        pts += [theta + e[i] + e[j], theta + e[i] - e[j], theta - e[i] + e[j], theta - e[i] - e[j]]
-    f = loglik(np.array(pts))
-    f0, fp, fm = f[0], f[1: 2 * d + 1: 2], f[2: 2 * d + 1: 2]
-    h = np.diag((fp - 2 * f0 + fm) / scale**2)
-    q = f[2 * d + 1:].reshape(-1, 4)
-    for (i, j), (pp, pm, mp, mm) in zip(pairs, q):
-        h[i, j] = h[j, i] = (pp - pm - mp + mm) / (4 * scale[i] * scale[j])
-    return h
 
 
 def laplace_cov(hess: np.ndarray, scale: np.ndarray, max_sd: np.ndarray) -> np.ndarray:
@@ -208,7 +189,7 @@ class ModeFinder:
         """Local optima (n, dim) reached from thetas (n, dim) and the evaluations used."""
         import nlopt
 
-        from .fit import run_one
+        from ..fit import run_one
 
         post = self.post
         lo, hi = post.fit_bounds()
@@ -226,8 +207,6 @@ class ModeFinder:
     def add(self, optima: np.ndarray) -> int:
         """Merge optima (n, dim) into the known modes; new ones get a Laplace covariance.
         Returns the evaluations used."""
-        from .ensemble import curvature_scales
-
         lay = self.post.layout
         values = self.post(optima)
         optima, values = optima[np.isfinite(values)], values[np.isfinite(values)]
@@ -243,7 +222,7 @@ class ModeFinder:
                 covs.append(self.covs[known[0]])
                 continue
             scale = curvature_scales(lay, mu, self.post)
-            hess = loglik_hessian(self.post.log_likelihood, mu, 0.5 * scale)
+            hess = hessian(self.post.log_likelihood, mu, 0.5 * scale)
             evals += 2 * lay.dim**2 + 1 + 2 * lay.dim + 1
             covs.append(laplace_cov(hess, scale, self.max_sd))
         self.means, self.values, self.covs = modes, vals, np.array(covs)

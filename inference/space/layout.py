@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..generator import IDX, N_PARAMS
-from ..generator.model import wrap_phase
+from ...generator import IDX, N_PARAMS
+from ...generator.model import wrap_phase
 from .priors import PERMUTATIONS, PHASE_NAMES, SHARED, Priors
 
 DEFAULT_SIGMA_BOUNDS = (1e-4, 1.0)

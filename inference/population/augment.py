@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..generator.augment import VectorSource
-from .population_result import PopulationResult
+from ...generator.augment import VectorSource
+from .result import PopulationResult
 
 
 def load_population(population, label: str | None = None) -> PopulationResult:

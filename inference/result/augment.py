@@ -21,12 +21,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..generator.augment import ModelAugmenter, Renderer, SpecimenSource, VectorSource
-from ..generator.params import NONNEGATIVE, N_PARAMS, PHASES
-from ..generator.specimens import SpecimenSpread
-from ..radar import RadarConfig
-from ..generator.model import wrap_phase
-from .result import CalibrationResult, circular_stats
+from ...generator.augment import ModelAugmenter, Renderer, SpecimenSource, VectorSource
+from ...generator.params import NONNEGATIVE, N_PARAMS, PHASES
+from ...generator.specimens import SpecimenSpread
+from ...radar import RadarConfig
+from ...generator.model import wrap_phase
+from .posterior import CalibrationResult, circular_stats
 
 
 def load_posterior(posterior, label: str | None = None, allow_unconverged: bool = True) -> CalibrationResult:

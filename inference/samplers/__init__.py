@@ -19,7 +19,7 @@ its plugins form no loop.
 """
 from __future__ import annotations
 
-from .sampler_run import CalibrationInterrupted, Sampler, SamplerRun, stop_on_sigint
+from .base import CalibrationInterrupted, Sampler, SamplerRun, stop_on_sigint
 
 __all__ = ["SAMPLERS", "get_sampler", "CalibrationInterrupted", "Sampler", "SamplerRun", "stop_on_sigint"]
 

@@ -35,11 +35,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..generator.acquisition import Acquisition
-from ..generator.synthetic import SyntheticDraws
-from ..radar import RadarConfig
+from ...generator.acquisition import Acquisition
+from ...generator.synthetic import SyntheticDraws
+from ...radar import RadarConfig
 from .base import MarginalLikelihood
-from .layout import Layout
+from ..space.layout import Layout
 
 LOG_2PI = float(np.log(2 * np.pi))
 
@@ -97,15 +97,8 @@ class SyntheticLikelihood(MarginalLikelihood):
     def __init__(self, data: np.ndarray, layout: Layout, acquisition: Acquisition,
                  radar: RadarConfig = RadarConfig(), *, n_acquisitions: int = 16, ramps_drawn: int = 8,
                  stride: int = 8, seed=0, dtype: str = "float32", floor: float = 1e-3, batch: int = 16):
-        if not layout.marginal:
-            raise ValueError("SyntheticLikelihood needs a marginal Layout (Layout(..., marginal=True))")
-        self.data = np.asarray(data, dtype=np.float64)
-        if self.data.shape != (layout.M, radar.slice_length):
-            raise ValueError(f"data: expected shape ({layout.M}, {radar.slice_length}), got {self.data.shape}")
-        if int(stride) < 1:
-            raise ValueError(f"stride must be >= 1 bin, got {stride}")
-        self.layout, self.radar, self.acquisition = layout, radar, acquisition
-        self.stride, self.floor, self.batch, self.seed = int(stride), float(floor), int(batch), seed
+        self._take_data(data, layout, acquisition, radar, stride)
+        self.floor, self.batch, self.seed = float(floor), int(batch), seed
         self.draws = SyntheticDraws(acquisition, layout.E, radar, n_acquisitions=n_acquisitions,
                                     ramps_drawn=ramps_drawn, seed=seed, dtype=dtype)
         offsets = self.draws.window_offsets(self.stride)
@@ -113,11 +106,6 @@ class SyntheticLikelihood(MarginalLikelihood):
         self.offsets = offsets[self._keep]
         self.y = self.data[:, radar.slice_length // 2 + self.offsets]  # (M, B)
         self.inflate = 1.0 + layout.M / self.draws.O
-        self.n_calls = 0
-
-    @property
-    def n_bins(self) -> int:
-        return self.y.shape[1]
 
     def settings(self) -> dict:
         return {"likelihood": "synthetic (phases marginalised)", "acquisition": self.acquisition.to_dict(),

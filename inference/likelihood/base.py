@@ -11,6 +11,41 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...radar import RadarConfig, centred_slices, normalise
+
+
+def prepare_measured(profiles, radar: RadarConfig, normalisation: str, what: str = "measured profiles"):
+    """Check and normalise measured linear-magnitude profiles.
+
+    profiles: (n, L) or (L,) with L = radar.slice_length. A profile whose maximum is
+    not at index L // 2 is re-centred (zero-filled, as f(x) does). Returns
+    (normalised (n, L) float64, shifts (n,) in bins). Raises ValueError for a wrong
+    length, non-finite values or an all-zero profile.
+    """
+    y = np.asarray(profiles, dtype=np.float64)
+    if y.ndim == 1:
+        y = y[None, :]
+    if y.ndim != 2 or y.shape[0] == 0:
+        raise ValueError(f"{what}: expected shape (n, {radar.slice_length}) or ({radar.slice_length},), got {y.shape}")
+    if y.shape[1] != radar.slice_length:
+        raise ValueError(f"{what}: profiles have {y.shape[1]} bins; expected {radar.slice_length} "
+                         "(peak-centred slices, SPEC section 2)")
+    if not np.all(np.isfinite(y)):
+        row = int(np.argwhere(~np.isfinite(y))[0, 0])
+        raise ValueError(f"{what}: profile {row} holds NaN or inf; expected finite linear magnitudes")
+    zero = ~np.any(y != 0, axis=1)
+    if zero.any():
+        raise ValueError(f"{what}: profile(s) {np.flatnonzero(zero).tolist()} are all zeros; "
+                         "nothing to calibrate against")
+    if np.any(y < 0):
+        raise ValueError(f"{what}: negative values; expected linear magnitudes (>= 0), not dB")
+    half = radar.slice_length // 2
+    peak = np.argmax(y, axis=1)
+    shifts = peak - half
+    if np.any(shifts):
+        y, _ = centred_slices(y, peak, radar.slice_length)
+    return normalise(y, normalisation), shifts
+
 
 class LogPosteriorBase:
     """log p(theta | data) up to a constant; see the module doc."""
@@ -76,7 +111,27 @@ class LogPosteriorBase:
 
 class MarginalLikelihood(LogPosteriorBase):
     """Base of the likelihoods with the phases marginalised (a marginal Layout): the fit
-    works on all of theta, the measurements' own terms polished first."""
+    works on all of theta, the measurements' own terms polished first. Holds what every
+    marginal likelihood checks and keeps: data (M, L) against the marginal layout, the
+    acquisition, the radar and the stride of the compared bins."""
+
+    def _take_data(self, data: np.ndarray, layout, acquisition, radar: RadarConfig, stride: int) -> None:
+        """The shared constructor checks (a marginal layout, data (M, L), stride >= 1 bin)
+        and attributes (data, layout, radar, acquisition, stride, n_calls)."""
+        if not layout.marginal:
+            raise ValueError(f"{type(self).__name__} needs a marginal Layout (Layout(..., marginal=True))")
+        self.data = np.asarray(data, dtype=np.float64)
+        if self.data.shape != (layout.M, radar.slice_length):
+            raise ValueError(f"data: expected shape ({layout.M}, {radar.slice_length}), got {self.data.shape}")
+        if int(stride) < 1:
+            raise ValueError(f"stride must be >= 1 bin, got {stride}")
+        self.layout, self.radar, self.acquisition, self.stride = layout, radar, acquisition, int(stride)
+        self.n_calls = 0
+
+    @property
+    def n_bins(self) -> int:
+        """Bins compared per measurement."""
+        return self.y.shape[1]
 
     def fit_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         return self.layout.theta_bounds()

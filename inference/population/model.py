@@ -39,9 +39,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..generator.params import IDX, N_PARAMS
-from ..generator.specimens import SpecimenSpread
-from .priors import align_lines
+from ...generator.params import IDX, N_PARAMS
+from ...generator.specimens import SpecimenSpread
+from ..space.priors import align_lines
 
 SPREADS = ("speed", "frequency", "amplitude", "gamma", "skew")
 """The population's hyperparameters (relative spreads, :class:`SpecimenSpread` fields)."""
@@ -206,8 +206,8 @@ def sample_spreads(drones: list[DroneSummary], model: PopulationModel, hyperprio
     whether it converged."""
     import emcee
 
-    from ..radar.progress import progress_bar
-    from .ensemble import estimate_tau
+    from ...radar.progress import progress_bar
+    from ..samplers.toolbox import estimate_tau
 
     measured = np.any([d.mask for d in drones], axis=0)  # none: the spreads keep their prior
 

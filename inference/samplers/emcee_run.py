@@ -1,12 +1,10 @@
-"""The emcee plugin of :mod:`.samplers`: ensemble MCMC from the fit, resumable
-through emcee's HDF5 backend.
+"""The emcee driver :func:`run_ensemble` (the ``emcee`` sampler's and the amortized
+route's learned likelihood's runs): one convergence rule, resumable through emcee's
+HDF5 backend.
 
-* Walkers start around the best fit with per-coordinate spreads from the local
-  curvature of log p (:func:`curvature_scales`, x ``init_ball``): tight where the
-  data pin a parameter, wide (up to 0.3 prior widths) where they do not.
 * Moves: differential evolution (``DEMove``, three step scales) taken modulo 2 pi
   on the phases, so phases live on the circle without boundaries, and (a share
-  ``settings.relabel``) the line relabelling of :meth:`.priors.Layout.random_relabel`,
+  ``settings.relabel``) the line relabelling of :meth:`..space.layout.Layout.random_relabel`,
   an exact symmetry no translation crosses (:func:`make_moves`).
 * The chain runs in blocks of ``check_every`` steps (aligned to absolute step
   numbers, so a resumed run checks at the same steps as an uninterrupted one);
@@ -37,14 +35,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..radar.keys import cache_key
-from ..radar.seeds import rng as seeded_rng
-from ..generator.model import wrap_phase
-from .sampler_run import CalibrationInterrupted, SamplerRun, stop_on_sigint
+from ...generator.model import wrap_phase
+from .base import CalibrationInterrupted, SamplerRun, stop_on_sigint
+from .toolbox import estimate_tau
 
 GROUP = "mcmc"
 DE_MIX = ((0.25, 0.5), (1.0, 0.4), (None, 0.1))  # (factor of the standard gamma or None = 1.0, weight)
-
 
 MAX_STORED_FLOATS = 2e7  # chain kept in memory / on disk: ~160 MB of float64
 
@@ -61,36 +57,6 @@ def store_interval(settings, n_walkers: int, dim: int) -> int:
     return max(1, int(np.ceil(steps * n_walkers * dim / MAX_STORED_FLOATS)))
 
 
-def fingerprint(*arrays, text: str = "") -> str:
-    return cache_key(text=text, arrays=arrays, dtype=np.float64, length=32)
-
-
-def estimate_tau(chain: np.ndarray, phase_cols=(), discard: float = 1 / 3) -> np.ndarray:
-    """Integrated autocorrelation time per coordinate (emcee's estimator, c=5), in steps.
-
-    The first ``discard`` of the chain (the expansion from the start ball) is left
-    out. Phases are measured through cos and sin (the larger tau of the two), so a
-    wrap at +-pi is not mistaken for a jump.
-    """
-    import emcee
-
-    chain = chain[int(discard * chain.shape[0]):]
-    cols = np.asarray(phase_cols, dtype=int)
-    if cols.size:
-        ang = chain[..., cols]
-        chain = np.concatenate([chain, np.cos(ang), np.sin(ang)], axis=2)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        tau = emcee.autocorr.integrated_time(chain, c=5, tol=0, quiet=True)
-    # a coordinate some walker never moved in has no estimate: count it as the whole chain
-    tau = np.where(np.isfinite(tau), tau, chain.shape[0])
-    d = chain.shape[2] - 2 * cols.size
-    if cols.size:
-        tau_c, tau_s = tau[d: d + cols.size], tau[d + cols.size:]
-        tau = tau[:d].copy()
-        tau[cols] = np.maximum(tau_c, tau_s)
-    return tau
-
-
 def make_moves(phase_cols, dim: int, relabel=None, p_relabel: float = 0.0, proposal=None, p_proposal: float = 0.0):
     """Differential-evolution moves whose proposals are wrapped on the phase columns.
 
@@ -104,7 +70,7 @@ def make_moves(phase_cols, dim: int, relabel=None, p_relabel: float = 0.0, propo
     the standard scale, and gamma = 1 (10%: swaps a walker between the regions
     occupied by two others, the mode-hopping move of ter Braak 2006).
     ``relabel`` (coords, random) -> (coords', log |Jacobian|): a random bijection
-    whose inverse is as likely (:meth:`.priors.Layout.random_relabel`), used as an
+    whose inverse is as likely (:meth:`..space.layout.Layout.random_relabel`), used as an
     emcee ``MHMove`` for a share ``p_relabel`` of the steps (the DE weights shrink).
     ``proposal`` (coords, random) -> (coords', log q(coords) - log q(coords')): an
     independence proposal (e.g. an amortized posterior) as an ``MHMove`` for a share
@@ -129,60 +95,6 @@ def make_moves(phase_cols, dim: int, relabel=None, p_relabel: float = 0.0, propo
     if proposal is not None and p_proposal > 0:
         moves.append((emcee.moves.MHMove(proposal), p_proposal))
     return moves
-
-
-def curvature_scales(layout, theta_best: np.ndarray, log_post, rel_step: float = 0.01, cap: float = 0.3):
-    """Per-coordinate scales (dim,) of the posterior at theta_best: 1 / sqrt(-d2 log p / d theta_j^2)
-    by central differences (step ``rel_step`` x prior width), clipped to
-    [1e-4, ``cap``] x width. A coordinate the data do not constrain (flat log p) gets
-    ``cap`` x its prior width, so walkers start spread over it instead of in a
-    ball that would take thousands of steps to expand."""
-    lo, hi = layout.theta_bounds()
-    width = hi - lo
-    if not layout.marginal:
-        width[layout.dim_z:] = 2.0  # ln sigma: 2 nats (its prior box is far wider than the data allow)
-    h = rel_step * width
-    pts = np.repeat(theta_best[None], 2 * layout.dim + 1, axis=0)
-    idx = np.arange(layout.dim)
-    pts[1 + idx, idx] += h
-    pts[1 + layout.dim + idx, idx] -= h
-    lp = log_post(pts)
-    plus, minus = lp[1: 1 + layout.dim], lp[1 + layout.dim:]
-    with np.errstate(invalid="ignore"):
-        curv = -(plus - 2 * lp[0] + minus) / h**2
-    one_sided = ~np.isfinite(curv)  # a bound or the ordering constraint on one side
-    side = np.where(np.isfinite(plus), plus, minus)
-    curv[one_sided] = -2 * (side[one_sided] - lp[0]) / h[one_sided] ** 2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        scale = np.where(np.isfinite(curv) & (curv > 0), 1.0 / np.sqrt(curv), np.inf)
-    return np.clip(scale, 1e-4 * width, cap * width)
-
-
-def initial_ball(layout, theta_best: np.ndarray, log_post, n_walkers: int, scale,
-                 rng: np.random.Generator) -> np.ndarray:
-    """n_walkers points theta_best + scale * N(0, 1) (scale: (dim,) or a fraction of the
-    prior widths), all inside the prior support (reflected at bounds, redrawn when
-    they break the ordering constraints)."""
-    lo, hi = layout.theta_bounds()
-    if np.ndim(scale) == 0:
-        scale = float(scale) * (hi - lo)
-    out = np.empty((0, layout.dim))
-    box = np.ones(layout.dim, bool)
-    box[layout.phase_cols] = False
-    for attempt in range(200):
-        th = theta_best + scale * rng.standard_normal((n_walkers, layout.dim))
-        th[:, box] = lo[box] + np.abs(th[:, box] - lo[box])
-        th[:, box] = hi[box] - np.abs(hi[box] - th[:, box])
-        th[:, layout.phase_cols] = wrap_phase(th[:, layout.phase_cols])
-        th[:, : layout.dim_z] = layout.canonical(th[:, : layout.dim_z])  # the mirror image: same density
-        th = th[np.isfinite(log_post(th))]
-        out = np.concatenate([out, th])[:n_walkers]
-        if len(out) == n_walkers:
-            return out
-        if attempt % 10 == 9:  # a narrow support near the best fit: a smaller ball
-            scale = scale * 0.5
-    raise ValueError("could not place walkers inside the prior around the best fit "
-                     "(is the best fit on the boundary of the ordering constraint w_a < w_b?)")
 
 
 def _check_backend(path: Path, fp: str, shape) -> int:
@@ -210,63 +122,6 @@ def _check_backend(path: Path, fp: str, shape) -> int:
         raise ValueError(f"{path}: not a readable HDF5 file ({exc})") from exc
 
 
-def fit_modes(post, fit) -> list[np.ndarray]:
-    """The fit-space centres of the distinct modes the fit found: the best, then every
-    start within RIVAL_MISFIT nats of it and more than AGREE_DISTANCE prior widths
-    from each centre already taken (in the shared parameters)."""
-    from .fit import AGREE_DISTANCE, RIVAL_MISFIT
-
-    layout = post.layout
-    lo, hi = layout.z_bounds()
-    width = (hi - lo)[: layout.n_shared]
-    centres = [np.asarray(fit.best_z)]
-    for i in np.argsort(fit.starts_misfit):
-        z = fit.starts_z[i]
-        if fit.starts_misfit[i] - fit.misfit > RIVAL_MISFIT:
-            break
-        if all(np.max(np.abs(z[: layout.n_shared] - c[: layout.n_shared]) / width) > AGREE_DISTANCE
-               for c in centres):
-            centres.append(np.asarray(z))
-    return centres
-
-
-def start_walkers(post, fit, settings, n_walkers: int, rng) -> tuple[np.ndarray, int]:
-    """Initial walkers (n_walkers, dim): around the best fit, and with ``init_modes``
-    also around every distinct rival mode the fit found (:func:`fit_modes`), split
-    evenly, so the ensemble starts on every competitive mode it knows of.
-    Returns (walkers, number of modes started on)."""
-    layout = post.layout
-    centres = fit_modes(post, fit) if settings.init_modes else [fit.best_z]
-    counts = np.full(len(centres), n_walkers // len(centres))
-    counts[0] += n_walkers - counts.sum()
-    groups = []
-    for v, n in zip(centres, counts):
-        theta = post.theta_from_fit(np.asarray(v)[None])[0]
-        scales = settings.init_ball * curvature_scales(layout, theta, post)
-        groups.append(initial_ball(layout, theta, post, int(n), scales, rng))
-    return np.concatenate(groups), len(centres)
-
-
-class EmceeSampler:
-    """The default sampler: emcee's ensemble (DE moves on the circle + line relabelling),
-    run in blocks of ``check_every`` steps until ``min_tau_multiple`` x max tau or the
-    time budget (module doc). Resumable from its HDF5 checkpoint."""
-
-    name = "emcee"
-
-    def run(self, post, fit, settings, seed_seq, *, backend_path=None, fingerprint: str = "") -> SamplerRun:
-        layout = post.layout
-        ball_ss, mc_ss = seed_seq.spawn(2)
-        n_walkers = max(settings.n_walkers or 2 * layout.dim + 2, 2 * layout.dim + 2, 32)  # DE needs > 2 dim
-        n_walkers += n_walkers % 2
-        p0, n_modes = start_walkers(post, fit, settings, n_walkers, seeded_rng(ball_ss))
-        run = run_ensemble(post, p0, settings, seed=int(mc_ss.generate_state(1)[0]), backend_path=backend_path,
-                           fp=fingerprint, phase_cols=layout.phase_cols,
-                           relabel=layout.random_relabel if settings.relabel > 0 and layout.labelled else None)
-        run.extra["n_start_modes"] = int(n_modes)
-        return run
-
-
 def _block_end(it: int, check: int, max_steps: int | None) -> int:
     end = (it // check + 1) * check
     return end if max_steps is None else min(end, max_steps)
@@ -288,7 +143,7 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
     """
     import emcee
 
-    from ..radar.progress import progress_bar
+    from ...radar.progress import progress_bar
 
     t0 = time.perf_counter()
     n_walkers, dim = p0.shape

@@ -43,8 +43,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..generator import IDX, N_PARAMS, ClassParams
-from ..radar import RadarConfig
+from ...generator import IDX, N_PARAMS, ClassParams
+from ...radar import RadarConfig
 
 SHARED = ("A_a", "A_b", "A_p", "A_m", "w_a", "w_b", "C_p", "C_m")
 PERMUTATIONS = tuple(itertools.permutations(range(4)))

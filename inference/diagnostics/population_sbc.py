@@ -24,21 +24,21 @@ import time
 
 import numpy as np
 
-from ..generator import ClassParams, load_reference
-from ..radar.seeds import seed_sequence
-from .population import SPREADS, Hyperprior
+from ...generator import ClassParams, load_reference
+from ...radar.seeds import seed_sequence
+from ..population.model import SPREADS, Hyperprior
 from .sbc import run_replicates, sbc_quantities, summarise
-from .settings import CalibrationSettings
+from ..settings import CalibrationSettings
 
 
 def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n_drones: int,
                          n_acquisitions: int, ramps: int, settings: CalibrationSettings, hyperprior: Hyperprior,
                          n_rank: int) -> dict:
     """One population SBC replicate (module doc): ranks of the spreads and of the unseen drone's lines."""
-    from ..generator.chain import SceneConfig, simulate_campaign
-    from ..generator.specimens import SpecimenSpread
-    from .calibrate import calibrate
-    from .population_result import calibrate_population
+    from ...generator.chain import SceneConfig, simulate_campaign
+    from ...generator.specimens import SpecimenSpread
+    from ..calibrate import calibrate
+    from ..population.result import calibrate_population
 
     truth_ss, data_ss, run_ss, pop_ss, draw_ss = ss.spawn(5)
     spreads = hyperprior.sample(1, np.random.default_rng(truth_ss))[0]

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..generator import IDX, N_PARAMS
+from ...generator import IDX, N_PARAMS
 from .layout import Layout
 from .priors import PERMUTATIONS, engine_lines
 

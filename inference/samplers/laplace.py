@@ -7,11 +7,11 @@ builds that Gaussian and corrects it exactly:
 1. the Hessian of the log posterior at the fit's best point, by central differences
    (steps ``0.3`` x the per-coordinate curvature scale, every pair in one batched
    call: 2 d^2 evaluations); a direction the data do not constrain (or a prior bound
-   on one side) gets its curvature scale from :func:`.ensemble.curvature_scales`;
+   on one side) gets its curvature scale from :func:`.toolbox.curvature_scales`;
 2. ``n_particles`` draws, inside the prior, from multivariate Student-t's (5 degrees
    of freedom, the Gaussian's covariance inflated by ``1.5^2``: heavier tails than the
    target, so the weights stay bounded), one at each distinct mode the fit found
-   (:func:`.ensemble.fit_modes`; step 1 at each), weighted by their Laplace masses.
+   (:func:`.toolbox.fit_modes`; step 1 at each), weighted by their Laplace masses.
    A mode the fit did not find is not proposed: IS cannot see it (the fit's starts
    are the guard, as they are for emcee's start);
 3. importance weights p/q, Pareto-smoothed (arviz ``psislw``): the Pareto k-hat says
@@ -29,46 +29,21 @@ import time
 
 import numpy as np
 
-from .sampler_run import SamplerRun
+from .base import SamplerRun
+from .toolbox import curvature_scales, fit_modes, hessian, systematic_resample
 
 NU = 5.0  # Student-t degrees of freedom of the proposal
 INFLATE = 1.5  # proposal sd / Laplace sd
 KHAT_MAX, ESS_MIN = 0.7, 400
 
 
-def hessian(log_post, theta: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """Central-difference Hessian (d, d) of log_post at theta with steps h (d,), one batched call."""
-    d = len(theta)
-    i, j = np.triu_indices(d, 1)
-    signs = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]])
-    pts = [theta[None]]
-    for k in (2, -2):  # diagonal: f(x +- 2h e_i)
-        p = np.repeat(theta[None], d, 0)
-        p[np.arange(d), np.arange(d)] += k * h
-        pts.append(p)
-    for si, sj in signs:
-        p = np.repeat(theta[None], len(i), 0)
-        p[np.arange(len(i)), i] += si * h[i]
-        p[np.arange(len(i)), j] += sj * h[j]
-        pts.append(p)
-    lp = log_post(np.concatenate(pts))
-    f0, plus, minus = lp[0], lp[1:1 + d], lp[1 + d:1 + 2 * d]
-    q = lp[1 + 2 * d:].reshape(4, len(i))
-    H = np.zeros((d, d))
-    H[np.arange(d), np.arange(d)] = (plus - 2 * f0 + minus) / (4 * h**2)
-    off = (q[0] - q[1] - q[2] + q[3]) / (4 * h[i] * h[j])
-    H[i, j] = H[j, i] = off
-    return H
-
-
 def laplace_covariance(log_post, layout, theta: np.ndarray) -> np.ndarray:
     """The Gaussian's covariance (d, d) at theta: -H^-1, with directions the Hessian
     cannot see (a bound within reach, a flat or convex direction) given their
     curvature scale alone."""
-    from .ensemble import curvature_scales
-
     scale = curvature_scales(layout, theta, log_post)
-    H = hessian(log_post, theta, 0.3 * scale)
+    h = 0.3 * scale
+    H = hessian(log_post, theta, h, 2 * h)
     bad = ~np.isfinite(np.diag(H)) | (np.diag(H) >= 0)
     bad |= ~np.all(np.isfinite(H), axis=1)
     H[bad, :] = 0.0
@@ -105,21 +80,13 @@ def mixture_t(centres: list, covs: list, log_mass: np.ndarray):
     return draw, logpdf
 
 
-def systematic_resample(weights: np.ndarray, rng) -> np.ndarray:
-    """Indices (n,) of a systematic resample of normalised weights (n,)."""
-    n = len(weights)
-    pos = (rng.random() + np.arange(n)) / n
-    return np.minimum(np.searchsorted(np.cumsum(weights), pos), n - 1)
-
-
 class LaplaceSampler:
     """Importance sampling from the Laplace approximation at the fit (module doc)."""
 
     name = "laplace"
 
     def run(self, post, fit, settings, seed_seq, *, backend_path=None, fingerprint: str = "") -> SamplerRun:
-        from .ensemble import fit_modes
-        from .result import import_arviz
+        from ..result.posterior import import_arviz
 
         t0 = time.perf_counter()
         layout = post.layout

@@ -13,47 +13,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..generator import profiles as model_profiles
-from ..generator import spectra as model_spectra
-from ..radar import RadarConfig, centred_slices, normalise
+from ...generator import profiles as model_profiles
+from ...generator import spectra as model_spectra
+from ...radar import RadarConfig, normalise
 from .base import LogPosteriorBase
-from .layout import Layout
+from ..space.layout import Layout
 
 LOG_2PI = float(np.log(2 * np.pi))
 ALIGNMENTS = ("tone", "peak")
-
-
-def prepare_measured(profiles, radar: RadarConfig, normalisation: str, what: str = "measured profiles"):
-    """Check and normalise measured linear-magnitude profiles.
-
-    profiles: (n, L) or (L,) with L = radar.slice_length. A profile whose maximum is
-    not at index L // 2 is re-centred (zero-filled, as f(x) does). Returns
-    (normalised (n, L) float64, shifts (n,) in bins). Raises ValueError for a wrong
-    length, non-finite values or an all-zero profile.
-    """
-    y = np.asarray(profiles, dtype=np.float64)
-    if y.ndim == 1:
-        y = y[None, :]
-    if y.ndim != 2 or y.shape[0] == 0:
-        raise ValueError(f"{what}: expected shape (n, {radar.slice_length}) or ({radar.slice_length},), got {y.shape}")
-    if y.shape[1] != radar.slice_length:
-        raise ValueError(f"{what}: profiles have {y.shape[1]} bins; expected {radar.slice_length} "
-                         "(peak-centred slices, SPEC section 2)")
-    if not np.all(np.isfinite(y)):
-        row = int(np.argwhere(~np.isfinite(y))[0, 0])
-        raise ValueError(f"{what}: profile {row} holds NaN or inf; expected finite linear magnitudes")
-    zero = ~np.any(y != 0, axis=1)
-    if zero.any():
-        raise ValueError(f"{what}: profile(s) {np.flatnonzero(zero).tolist()} are all zeros; "
-                         "nothing to calibrate against")
-    if np.any(y < 0):
-        raise ValueError(f"{what}: negative values; expected linear magnitudes (>= 0), not dB")
-    half = radar.slice_length // 2
-    peak = np.argmax(y, axis=1)
-    shifts = peak - half
-    if np.any(shifts):
-        y, _ = centred_slices(y, peak, radar.slice_length)
-    return normalise(y, normalisation), shifts
 
 
 class LogPosterior(LogPosteriorBase):

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..generator import IDX, N_PARAMS
+from ...generator import IDX, N_PARAMS
 
 PLOT_UNITS = {**{f"A_{r}": (f"A_{r} (mm)", 1e3) for r in "abpm"},
               **{f"w_{r}": (f"f_{r} (Hz)", 1 / (2 * np.pi)) for r in "ab"},
@@ -31,7 +31,7 @@ def plot_corner(res, path, max_params: int = 24):
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
-    from ..radar.plots import save_figure
+    from ...radar.plots import save_figure
 
     data, names = res.plot_matrix()
     best = res.best_fit.reshape(res.n_engines, N_PARAMS)
@@ -88,7 +88,7 @@ def plot_trace(res, path):
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
-    from ..radar.plots import save_figure
+    from ...radar.plots import save_figure
 
     tr = res.idata["chain_trace"]
     chain, steps = tr["theta"].values, tr["step"].values

@@ -26,14 +26,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..generator import N_PARAMS, ClassParams, load_reference
-from ..generator.acquisition import Acquisition
-from ..radar import RadarConfig
-from ..radar.seeds import rng as seeded_rng
-from ..radar.seeds import seed_sequence
-from .layout import Layout
-from .priors import Priors, engine_lines
-from .settings import CalibrationSettings
+from ...generator import N_PARAMS, ClassParams, load_reference
+from ...generator.acquisition import Acquisition
+from ...radar import RadarConfig
+from ...radar.seeds import rng as seeded_rng
+from ...radar.seeds import seed_sequence
+from ..space.layout import Layout
+from ..space.priors import Priors, engine_lines
+from ..settings import CalibrationSettings
 
 
 def sbc_quantities(x: np.ndarray) -> tuple[np.ndarray, list[str]]:
@@ -61,7 +61,7 @@ def simulate_measurements(truth: np.ndarray, n_measurements: int, acquisition: A
     """n_measurements profiles (n, L) of one drone (13E,) through the scene simulator and
     the chain, the scene (default :class:`~mdaug.generator.chain.SceneConfig`) taking
     its ramps, phases, yaw and body return from the acquisition."""
-    from ..generator.augment import Renderer
+    from ...generator.augment import Renderer
 
     renderer = Renderer(acquisition, normalisation="none", radar=radar, through_chain=True, scene=scene)
     return renderer.render(np.repeat(np.asarray(truth, float)[None], n_measurements, axis=0),
@@ -75,7 +75,7 @@ def sbc_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, ramps: i
     ranks of the truth's test quantities among n_rank posterior draws."""
     import time
 
-    from .calibrate import calibrate
+    from ..calibrate import calibrate
 
     acq = Acquisition.measured(ramps)
     layout = Layout(ref.n_engines, n_measurements, Priors.from_reference(ref, radar), marginal=True)
