@@ -134,12 +134,11 @@ def run_calibrate(args) -> int:
                                    "time_budget": args.time_budget, "likelihood": args.likelihood,
                                    "n_acquisitions": args.draws, "ramps_drawn": args.ramps_drawn}.items()
                  if v is not None}
-    from ..generator.acquisition import acquisition_from_file
+    from ..generator.acquisition import Acquisition, acquisition_from_file, resolve_acquisition
 
     from_file = acquisition_from_file(data.extra, str(args.measured))
-    if from_file is not None and args.ramps is not None and args.ramps != from_file.ramps:
-        raise ValueError(f"{args.measured} says ramps_per_frame = {from_file.ramps} but --ramps says {args.ramps}; "
-                         "make them agree (or drop --ramps)")
+    resolve_acquisition(from_file, None if args.ramps is None else Acquisition.measured(args.ramps),
+                        str(args.measured), "--ramps")  # the one file-against-setting rule (K must agree)
     acquisition, _ = acquisition_from_args(args, from_file)
     source = ("from the options" if acquisition_given(args) else
               f"as {args.measured} states it" if from_file is not None else "the published single chirp (default)")

@@ -191,8 +191,8 @@ def acquisition_from_file(extra: dict, source: str) -> Acquisition | None:
 
 def resolve_acquisition(from_file: Acquisition | None, given: Acquisition | None, file_name: str,
                         given_name: str) -> Acquisition:
-    """The acquisition to use when a data file and a setting (flag, config) may both state
-    one: either alone wins; both must agree on K (an error names both)."""
+    """The one file-against-setting rule: the acquisition when a data file and a setting (flag,
+    config) may both state one; either alone wins, both must agree on K (an error names both)."""
     if from_file is not None and given is not None and from_file.ramps != given.ramps:
         raise ValueError(f"{file_name} says {from_file.ramps} ramp(s) per frame but {given_name} says "
                          f"{given.ramps}; make them agree (or drop one)")

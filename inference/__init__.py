@@ -1,10 +1,15 @@
 """Calibration with uncertainty: measured profiles -> posterior over a class vector.
 
-The amortized calibration (:mod:`.amortized`: trained estimators, the default for
-measured acquisitions); the closed-form likelihood route: nlopt global fit, emcee
-posterior (resumable, HDF5), engine-count selection; arviz InferenceData (NetCDF),
-corner and trace plots, posterior augmentation, the population of drones.
-Imports :mod:`mdaug.generator` and :mod:`mdaug.radar` only.
+Rooms, by role: :mod:`.likelihood` (the likelihoods over one base, and the preparation
+of measured profiles); :mod:`.space` (priors and the layouts of theta);
+:mod:`.samplers` (the sampler registry over its plugins emcee, SMC and Laplace, their
+interface and shared toolbox); :mod:`.amortized` (trained estimators, the default
+for measured acquisitions); :mod:`.result` (the posterior as arviz InferenceData in
+NetCDF, its plots, report and augmenter); :mod:`.population` (the class as a
+population of drones); :mod:`.diagnostics` (simulation-based calibration). At the
+top: :mod:`.calibrate` (one drone -> a result), :mod:`.fit` (the multi-start nlopt
+fit), :mod:`.compare` (engine-count selection) and :mod:`.settings`. Imports
+:mod:`mdaug.generator` and :mod:`mdaug.radar` only.
 """
 from .calibrate import calibrate
 from .likelihood.closed_form import ClosedFormLikelihood

@@ -2,10 +2,10 @@
 
 Steps: check and normalise the measurements; priors from the class reference; the
 likelihood of the measurements under their acquisition (phases marginalised,
-:mod:`.synthetic`, or fitted, :mod:`.likelihood`, see
+:mod:`.likelihood.synthetic`, or fitted, :mod:`.likelihood.fitted_phases`, see
 :func:`use_marginal`); a multi-start nlopt fit (:mod:`.fit`); a sampler plugin
 (:mod:`.samplers`: emcee by default, to 50 tau or the time budget); draws,
-log-likelihood and diagnostics packed in an arviz InferenceData (:mod:`.result`).
+log-likelihood and diagnostics packed in an arviz InferenceData (:mod:`.result.posterior`).
 Engine-count comparison sits above this module (:mod:`.compare`). One seed drives
 everything (a SeedSequence spawns the fit's and the sampler's streams, and the
 marginal likelihood's common random numbers).
@@ -222,7 +222,7 @@ def _posterior_variables(layout: Layout, theta: np.ndarray):
 
 def build_result(ref, layout: Layout, post, fit, run: SamplerRun, theta, lp, loglik, settings, radar,
                  shifts, *, acquisition: Acquisition, fit_reused: bool = False) -> CalibrationResult:
-    """Pack draws, diagnostics and metadata into an InferenceData (see :mod:`.result`).
+    """Pack draws, diagnostics and metadata into an InferenceData (see :mod:`.result.posterior`).
     loglik: (n, M, L) per bin (fitted phases) or (n, M) per measurement (marginal)."""
     import xarray as xr
 

@@ -3,9 +3,9 @@
 random scan of every measurement's phases when they are fitted).
 
 Both likelihoods expose one fit space (``fit_bounds``, ``fit_objective``,
-``canonical_fit``, ``theta_from_fit``): for :class:`.likelihood.LogPosterior` it is
+``canonical_fit``, ``theta_from_fit``): for :class:`.likelihood.fitted_phases.LogPosterior` it is
 z with the noise level profiled out (misfit = negative profile log-likelihood),
-for :class:`.synthetic.SyntheticLikelihood` the whole theta (negative
+for :class:`.likelihood.synthetic.SyntheticLikelihood` the whole theta (negative
 log-likelihood); the global stage of the latter runs on its ``coarse()`` copy
 (fewer simulated acquisitions: a global search needs the landscape, not its last
 decimal) and the local polish on the likelihood itself. The objective is

@@ -36,19 +36,19 @@ class CalibrationSettings:
 
     Both samplers: a share ``relabel`` of the moves give an engine's four lines to
     the roles (a, b, p, m) in a random other order (an exact symmetry of f(x), see
-    :mod:`.priors`), so the posterior covers every labelling the prior allows; 0
+    :mod:`.space.priors`), so the posterior covers every labelling the prior allows; 0
     switches it off.
 
     Likelihood: ``likelihood`` ``auto`` (default) uses the acquisition: when its
     phases are random (``uniform``) or it averages several ramps, the phases are
-    marginalised in closed form (:class:`.closed_form.ClosedFormLikelihood`, sampled
-    in line space, :class:`.line_layout.LineLayout`; compared every ``stride`` bins;
+    marginalised in closed form (:class:`.likelihood.closed_form.ClosedFormLikelihood`, sampled
+    in line space, :class:`.space.line_layout.LineLayout`; compared every ``stride`` bins;
     lines below ``amp_tol`` x sum(Gamma) and sidelobes below ``reach_tol`` left out,
     pairs of lines below ``pair_tol`` of a bin's power summed at the mean Fejer
     weight; ``model_floor`` x the peak added to every bin's sd); the published single
-    chirp at fixed phases fits them (:class:`.likelihood.LogPosterior`, below).
+    chirp at fixed phases fits them (:class:`.likelihood.fitted_phases.LogPosterior`, below).
     ``marginal`` / ``fitted`` force one; ``synthetic`` is the Monte-Carlo check of the
-    closed form (:class:`.synthetic.SyntheticLikelihood`, ``n_acquisitions`` O
+    closed form (:class:`.likelihood.synthetic.SyntheticLikelihood`, ``n_acquisitions`` O
     simulated acquisitions of ``ramps_drawn`` ramps each).
 
     Model (fitted phases): ``normalisation`` of measured and model profiles (SPEC section 2);
@@ -56,14 +56,14 @@ class CalibrationSettings:
     the carrier bin and fits a per-measurement offset of the tone (uniform on the
     priors' ``offset_bins``, +-4 bins by default), ``peak`` uses f(x)'s argmax
     centring (discontinuous in the parameters; offset then +-0.5 bins, sub-bin);
-    see :meth:`.likelihood.LogPosterior.model`. ``range_offset`` False fixes the
+    see :meth:`.likelihood.fitted_phases.LogPosterior.model`. ``range_offset`` False fixes the
     offset at 0. Noise is Gaussian, iid over bins, with a per-measurement
     level sigma (log-uniform prior on [sigma_min, sigma_max], in normalised units).
     ``dtype``: precision of f(x) (float32 is ~2x faster, error ~1e-7 of the peak).
     ``threads``: BLAS/FFT threads (the calibrate verb pins them; 1 is the default).
 
     Sampler: ``sampler`` ``"emcee"`` (default, the ensemble above) or ``"smc"``
-    (opt-in tempered sequential Monte Carlo from the prior, :mod:`.tempering`):
+    (opt-in tempered sequential Monte Carlo from the prior, :mod:`.samplers.tempering`):
     ``n_particles`` (0 = auto: max(500, 40 x dim)), reweighting to an ESS of
     ``smc_ess`` x N per stage (0.9: slow tempering; at 0.5 the population collapsed
     onto a wrong mode on HELI), a share ``smc_redraw`` of the rejuvenation proposals

@@ -23,7 +23,8 @@ class DataFileError(ValueError):
 
 
 def check_readable(path, what: str = "data file") -> Path:
-    """The one pre-open check: ``path`` is a non-empty regular file (else one line naming it)."""
+    """The one pre-open check: ``path`` is a non-empty regular file that can be opened
+    (else one line naming it)."""
     path = Path(path)
     if path.is_dir():
         raise DataFileError(f"{path}: is a folder, not a {what}")
@@ -31,6 +32,11 @@ def check_readable(path, what: str = "data file") -> Path:
         raise DataFileError(f"{path}: {'file' if what == 'data file' else what} not found")
     if path.stat().st_size == 0:
         raise DataFileError(f"{path}: file is empty")
+    try:
+        with open(path, "rb"):
+            pass
+    except OSError as exc:
+        raise DataFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
     return path
 
 

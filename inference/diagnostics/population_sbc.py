@@ -5,13 +5,13 @@ class drawn around its reference by the scene simulator's specimen model with th
 spreads, ``n_acquisitions`` acquisitions of each through the scene simulator and
 the radar chain (:func:`~mdaug.generator.chain.simulate_campaign`); the first
 ``n_drones`` calibrated one by one, then their population
-(:func:`.population_result.calibrate_population`); the last drone is the one not
+(:func:`..population.result.calibrate_population`); the last drone is the one not
 seen. Ranks among ``n_rank`` draws of:
 
 * each spread, among the hyper-posterior's draws;
 * the unseen drone's label-free lines (:func:`.sbc.sbc_quantities`: each engine's
   line frequencies sorted, their amplitudes, the Gamma ratios), among new drones
-  drawn from the population (:meth:`.population_result.PopulationResult.draw_drones`).
+  drawn from the population (:meth:`..population.result.PopulationResult.draw_drones`).
 
 The class mean is the reference in every replicate. That is a valid SBC of both
 because the class mean has a flat prior: the spreads' marginal likelihood does not

@@ -12,7 +12,7 @@ ADC, MTI); a full calibration (fit + sampler) under the matching
 
 * the label-free line frequencies: each engine's four vibration lines sorted by
   frequency (which line is the roll and which a mixing term only the prior tells:
-  :mod:`.priors`);
+  :mod:`..space.priors`);
 * the other physics: the amplitudes of those lines (same order) and, with several
   engines, the Gamma ratios.
 

@@ -1,6 +1,6 @@
 """The one interface of the calibration's likelihoods.
 
-A likelihood object holds the data, the :class:`~.layout.Layout` and what its model
+A likelihood object holds the data, the :class:`~..space.layout.Layout` and what its model
 needs, and is vectorised over walkers: theta (W, dim) -> (W,). Subclasses give
 :meth:`LogPosteriorBase.pointwise` (the log-likelihood per measurement, or per bin);
 the base adds the prior (``__call__``, what the samplers call), the fit's

@@ -1,6 +1,6 @@
 """Population augmentation: new drones of the class, drawn from its calibrated population.
 
-Each vector is a new drone (:meth:`.population_result.PopulationResult.draw_drones`:
+Each vector is a new drone (:meth:`.result.PopulationResult.draw_drones`:
 spreads and the mean drone from the hyper-posterior, then the specimen model). The
 strategy registry (:mod:`mdaug.strategies`, row ``population``) renders them under the
 drones' acquisition (:meth:`PopulationResult.measured_acquisition`). No width to tune:

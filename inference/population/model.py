@@ -16,8 +16,8 @@ The simulator multiplies by (1 + N(0, spread)); its log is N(0, spread^2) to fir
 order (at 15%: sd 0.151, mean -0.011), the one approximation of the model.
 
 Inference (what was chosen and why): each drone is calibrated on its own (the
-closed-form likelihood, :mod:`.calibrate`); its posterior draws, relabelled to the
-class reference's labelling (:func:`.priors.align_lines`), are summarised as a
+closed-form likelihood, :mod:`..calibrate`); its posterior draws, relabelled to the
+class reference's labelling (:func:`..space.priors.align_lines`), are summarised as a
 Gaussian in y on the coordinates the drone identifies (posterior sd <= 0.5 prior
 sd), with the role-space prior divided out (uniform in A, w, C: a tilt e^y in log
 coordinates, whose Gaussian quotient shifts the mean by -S 1). With Gaussian drone
@@ -146,7 +146,7 @@ class DroneSummary:
 
 
 def summarise_drone(result, model: PopulationModel, reference: np.ndarray, specimen: str = "") -> DroneSummary:
-    """A :class:`DroneSummary` from a drone's :class:`~.result.CalibrationResult`."""
+    """A :class:`DroneSummary` from a drone's :class:`~..result.posterior.CalibrationResult`."""
     x = align_lines(result.draws(), reference)
     y = model.transform(x)
     bounds = result.priors.bounds

@@ -1,7 +1,7 @@
 """The calibrated population of a class: fit from drones, saved, loaded, drawn from.
 
 :func:`calibrate_population` pools the per-drone calibrations of one class
-(:mod:`.population` for the model and the method); :class:`PopulationResult` holds
+(:mod:`.model` for the model and the method); :class:`PopulationResult` holds
 the hyper-posterior draws (spreads, and the class's mean drone given each), the
 drones' own posterior draws (for the coordinates no drone identifies), and draws
 new drones: spreads and mean from the hyper-posterior, then the scene simulator's
@@ -42,7 +42,7 @@ def calibrate_population(results, specimens=None, *, reference=None, hyperprior:
                          random_state=None, max_steps: int = 40000) -> "PopulationResult":
     """The population of one class from its drones' calibrations.
 
-    results: :class:`~.result.CalibrationResult` per drone (same class, engine count
+    results: :class:`~..result.posterior.CalibrationResult` per drone (same class, engine count
     and acquisition); specimens: their ids (default "0", "1", ...); reference: the
     class vector whose labelling the drones are read in (default: the class
     reference); hyperprior: the spreads' prior (default :meth:`Hyperprior.stated`).

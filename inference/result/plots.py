@@ -1,5 +1,5 @@
 """The calibration's plots: the corner plot and the walkers' trace of a
-:class:`~.result.CalibrationResult` (its methods ``plot_corner`` and ``plot_trace``
+:class:`~.posterior.CalibrationResult` (its methods ``plot_corner`` and ``plot_trace``
 call these), in physical units."""
 from __future__ import annotations
 

@@ -156,7 +156,7 @@ class CalibrationResult:
 
     @property
     def amortized(self) -> bool:
-        """Simulation-based (:mod:`.amortized`): every nuisance was marginalised by training."""
+        """Simulation-based (:mod:`..amortized`): every nuisance was marginalised by training."""
         return bool(self.meta.get("amortized", False))
 
     @property
@@ -256,7 +256,7 @@ class CalibrationResult:
         """Label-free view of the posterior (n_draws, E, 4, 2): every engine's four
         vibration lines as (frequency rad/s, amplitude m), sorted by frequency.
         Which line is the roll, the pitch or a mixing term is a labelling the data
-        cannot fix (:mod:`.priors`); the lines themselves are what one profile
+        cannot fix (:mod:`..space.priors`); the lines themselves are what one profile
         identifies."""
         w, a, _ = engine_lines(self.draws().reshape(self.n_draws, self.n_engines, N_PARAMS))
         order = np.argsort(w, axis=-1)
@@ -305,12 +305,12 @@ class CalibrationResult:
         return pd.DataFrame.from_dict(rows, orient="index")
 
     def report(self) -> str:
-        """Human-readable fit, convergence and posterior summary (:func:`.result_report.report`)."""
+        """Human-readable fit, convergence and posterior summary (:func:`.report.report`)."""
         from .report import amortized_report, report
 
         return (amortized_report if self.amortized else report)(self, IDENTIFIED_RATIO)
 
-    # ---- plots (:mod:`.result_plots`) ------------------------------------------------------
+    # ---- plots (:mod:`.plots`) ------------------------------------------------------
     def plot_matrix(self):
         """(draws x columns, names): the sampled parameters in stored units, phases of
         measurement 0 unwrapped around their circular mean."""
@@ -327,13 +327,13 @@ class CalibrationResult:
         return np.column_stack(cols), names
 
     def plot_corner(self, path, max_params: int = 24):
-        """The corner plot (:func:`.result_plots.plot_corner`)."""
+        """The corner plot (:func:`.plots.plot_corner`)."""
         from .plots import plot_corner
 
         return plot_corner(self, path, max_params)
 
     def plot_trace(self, path):
-        """The trace plot (:func:`.result_plots.plot_trace`)."""
+        """The trace plot (:func:`.plots.plot_trace`)."""
         from .plots import plot_trace
 
         return plot_trace(self, path)
@@ -355,17 +355,9 @@ class CalibrationResult:
         """Read a posterior written by :meth:`save`; ``class_name`` / ``n_engines``
         check that it is the posterior expected (clear errors otherwise)."""
         from ...radar import DataFileError
+        from ...radar.npz import check_readable
 
-        path = Path(path)
-        if path.is_dir():
-            raise DataFileError(f"{path}: is a folder, not a posterior file")
-        if not path.exists():
-            raise DataFileError(f"{path}: posterior file not found")
-        try:
-            with open(path, "rb"):
-                pass
-        except OSError as exc:
-            raise DataFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
+        path = check_readable(path, "posterior file")
         az = import_arviz()
         try:
             with warnings.catch_warnings():

@@ -1,5 +1,5 @@
 """The calibration's text report: fit, sampler, convergence and the posterior summary
-table with units (:meth:`~.result.CalibrationResult.report` calls :func:`report`)."""
+table with units (:meth:`~.posterior.CalibrationResult.report` calls :func:`report`)."""
 from __future__ import annotations
 
 import numpy as np
@@ -63,7 +63,7 @@ def report(res, identified_ratio: float) -> str:
 
 
 def amortized_report(res, identified_ratio: float) -> str:
-    """The report of a simulation-based calibration (:mod:`.amortized`): the estimator,
+    """The report of a simulation-based calibration (:mod:`..amortized`): the estimator,
     both routes with their diagnostics and SBC figures, the out-of-range check and
     the posterior summary table."""
     import pandas as pd

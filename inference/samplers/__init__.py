@@ -1,21 +1,24 @@
-"""The sampler registry: every sampler is a plugin that turns a log posterior and a
-fit into one result type, :class:`~.sampler_run.SamplerRun`.
+"""The sampler registry, the face of this room: every sampler is a plugin that turns a
+log posterior and a fit into one result type, :class:`~.base.SamplerRun`.
 
 * ``emcee`` (default, :mod:`.ensemble`): the affine-invariant ensemble from the
-  fit's modes, run until the chain is ``min_tau_multiple`` integrated
-  autocorrelation times long (an honest lower-bound check) or the time budget ends;
-* ``smc`` (:mod:`.tempering`): tempered sequential Monte Carlo from the prior, with
-  the evidence;
+  fit's modes, run by the one emcee driver (:mod:`.emcee_run`) until the chain is
+  ``min_tau_multiple`` integrated autocorrelation times long (an honest lower-bound
+  check) or the time budget ends;
+* ``smc`` (:mod:`.tempering`, with its mode jumps in :mod:`.modes`): tempered
+  sequential Monte Carlo from the prior, with the evidence;
 * ``laplace`` (:mod:`.laplace`): importance sampling from Laplace approximations at
   the fit's modes (seconds; Pareto k-hat and ESS say whether it can be trusted).
 
 A sampler is any object with a ``name`` and ``run(post, fit, settings, seed_seq,
-backend_path=None, fingerprint="") -> SamplerRun`` (:class:`~.sampler_run.Sampler`);
-:func:`get_sampler` looks one up by name (:data:`SAMPLERS`). emcee and SMC
+backend_path=None, fingerprint="") -> SamplerRun`` (:class:`~.base.Sampler`, the
+interface); :func:`get_sampler` looks one up by name (:data:`SAMPLERS`). emcee and SMC
 checkpoint to ``backend_path`` and resume from it; a Ctrl-C stops them at the next
-step boundary with the checkpoint saved (:class:`~.sampler_run.CalibrationInterrupted`,
-one line, no dump). The plugins import only :mod:`.sampler_run`, so this registry and
-its plugins form no loop.
+step boundary with the checkpoint saved (:class:`~.base.CalibrationInterrupted`,
+one line, no dump). Plugins are leaves: they import :mod:`.base`, the shared
+:mod:`.toolbox` (tau, curvature, the one Hessian, the fit's modes, the one systematic
+resampler) and their own helpers (:mod:`.emcee_run`, :mod:`.modes`), never another
+plugin, so this registry and its plugins form no loop.
 """
 from __future__ import annotations
 

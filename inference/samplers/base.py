@@ -1,8 +1,8 @@
 """What every sampler plugin shares: the interface (:class:`Sampler`), the one result
 type (:class:`SamplerRun`), and the Ctrl-C handling (:func:`stop_on_sigint`,
 :class:`CalibrationInterrupted`: a sampler stops at its next step boundary with its
-checkpoint saved). The plugins (:mod:`.ensemble`, :mod:`.tempering`) import this; the
-registry that names them is :mod:`.samplers`.
+checkpoint saved). Every plugin (:mod:`.ensemble`, :mod:`.tempering`, :mod:`.laplace`)
+imports this; the registry that names them is the room's face, :mod:`mdaug.inference.samplers`.
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The ``laplace`` sampler plugin: importance sampling from a Gaussian at the best fit.
 
-For a deterministic, smooth likelihood (the closed form, :mod:`.closed_form`) the
+For a deterministic, smooth likelihood (the closed form, :mod:`..likelihood.closed_form`) the
 posterior of a well-measured drone is close to a Gaussian at the fit. This plugin
 builds that Gaussian and corrects it exactly:
 

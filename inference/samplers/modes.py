@@ -148,7 +148,7 @@ DISCOVER_AT = (0.0, 1e-3, 1e-2, 0.1, 0.5)
 
 
 class ModeFinder:
-    """The optima of a :class:`.likelihood.LogPosterior` found so far, each with its
+    """The optima of a :class:`..likelihood.fitted_phases.LogPosterior` found so far, each with its
     log posterior and Laplace covariance, and the mode mixture built from them.
 
     At the first stage whose beta reaches each of ``discover_at``, ``n_polish``

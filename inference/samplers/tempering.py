@@ -116,7 +116,7 @@ def de_sweep(theta, ll, lprior, beta, target, rng, phase_cols=(), bounds=None, p
     instead an independence proposal from the mixture over known modes, accepted
     with the ratio that includes q(old) / q(new). With probability ``p_relabel``
     (needs ``relabel``: (theta (k, dim), rng) -> (theta', log |Jacobian|), a random
-    bijection whose inverse is as likely, e.g. :meth:`.priors.Layout.random_relabel`)
+    bijection whose inverse is as likely, e.g. :meth:`..space.layout.Layout.random_relabel`)
     the proposal is that map, accepted with the Jacobian in the ratio. Every
     particle picks its kernel independently of its state, so the sweep is a mixture
     of valid kernels.
@@ -218,7 +218,7 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
     p_relabel: an exact-symmetry move (see :func:`de_sweep`).
     backend_path: npz checkpoint (resumable, see above). progress: a bar of beta
     (0 -> 1) on a terminal. A Ctrl-C stops after the current stage (its checkpoint
-    saved) with :class:`.samplers.CalibrationInterrupted`. time_budget: seconds; checked
+    saved) with :class:`.CalibrationInterrupted`. time_budget: seconds; checked
     between the rejuvenation sweeps, the run ends within a sweep of it, flagged not converged.
     """
     t0 = time.perf_counter()
@@ -315,7 +315,7 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
 
 
 def posterior_target(post):
-    """(log prior, log likelihood) of a :class:`.likelihood.LogPosterior` for a batch theta (n, dim)."""
+    """(log prior, log likelihood) of a :class:`..likelihood.fitted_phases.LogPosterior` for a batch theta (n, dim)."""
 
     def target(theta):
         lp = post.layout.log_prior(theta)
@@ -327,7 +327,7 @@ def posterior_target(post):
 
 
 class SMCSampler:
-    """The tempered-SMC plugin of :mod:`.samplers` (see the module docstring)."""
+    """The tempered-SMC plugin of :mod:`mdaug.inference.samplers` (see the module docstring)."""
 
     name = "smc"
 

@@ -4,9 +4,9 @@ and the physics, for the two likelihoods.
 * ``marginal=False`` (fitted phases, the published single-chirp case K = 1 with
   fixed phases): z = [shared block, then per measurement 4E phases (rad) and the
   range offset (bins) if fitted]; theta = [z, ln sigma_m per measurement] (the
-  per-bin noise level of :class:`.likelihood.LogPosterior`).
+  per-bin noise level of :class:`..likelihood.fitted_phases.LogPosterior`).
 * ``marginal=True`` (the acquisition's phases marginalised,
-  :class:`.synthetic.SyntheticLikelihood`): z = [shared block, then per
+  :class:`..likelihood.synthetic.SyntheticLikelihood`): z = [shared block, then per
   measurement its carrier return (ratio to sum Gamma) and its offset (bins: where
   the measured profile's centre bin sits relative to the carrier tone)]; theta =
   [z, noise floor per measurement (dB, :func:`mdaug.generator.acquisition.noise_sigma`)].
