@@ -220,7 +220,7 @@ def reuse_key(engines, seed: int, settings, acquisition) -> dict:
 def run_population(args, profiles, drones, settings, acquisition) -> int:
     """Each drone calibrated on its own (kept beside OUT, reused by a rerun on the same
     data with the same options: :func:`reuse_key`), then the class's population
-    (:func:`mdaug.inference.calibrate_population`)."""
+    (:func:`mdaug.inference.population.result.calibrate_population`)."""
     import json
 
     import numpy as np

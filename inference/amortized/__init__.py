@@ -9,7 +9,7 @@ checked file); :mod:`.job` (training as a job, ending with its SBC); :mod:`.sbc`
 :mod:`.plots` (SBC of any route); :mod:`.mcmc` (nlopt + emcee on the learned
 likelihood); :mod:`.calibrate` (one drone -> a CalibrationResult); :mod:`.shipped`
 (the estimators in ``data/``). Imports :mod:`mdaug.generator`, :mod:`mdaug.radar` and
-the inference modules below it (layout, priors, likelihood preparation, ensemble,
-result, sbc summary). torch loads with :mod:`.nets`, :mod:`.train` and :mod:`.estimator`
+the inference rooms below it (space, likelihood preparation, the emcee driver,
+result, the SBC summary of diagnostics). torch loads with :mod:`.nets`, :mod:`.train` and :mod:`.estimator`
 (not with :mod:`mdaug.inference`), sbi inside the functions that build networks.
 """
