@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..radar import DataFileError, atomic_write, package_version
+from ..radar.npz import check_readable
 from .base import ProfileClassifier
 from .models import classifier_class
 
@@ -72,15 +73,7 @@ def save_model(model: ProfileClassifier, path) -> Path:
 
 
 def _read_archive(path: Path) -> tuple[dict, bytes]:
-    if path.is_dir():
-        raise DataFileError(f"{path}: is a folder, not a model file")
-    if not path.is_file():
-        raise DataFileError(f"{path}: model file not found")
-    try:
-        with open(path, "rb"):
-            pass
-    except OSError as exc:
-        raise DataFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    check_readable(path, "model file")
     if not zipfile.is_zipfile(path):
         raise DataFileError(f"{path}: not an mdaug model file (expected a ZIP archive written by "
                             f"'mdaug train' / save_model)")

@@ -119,7 +119,7 @@ def run_sbc(args) -> int:
                           for k, v in s["width_over_truth"].items() if k.startswith("line"))
         result(f"  median 90% width / truth (posterior/prior): {widths}")
     if args.figure is not None:
-        from ..inference.amortized.plots import sbc_figure
+        from ..inference.diagnostics.sbc_figure import sbc_figure
 
         sbc_figure(out, args.figure, f"{cls} K = {args.ramps}: SBC on {args.truths} simulated drones")
         result(f"wrote {args.figure}")

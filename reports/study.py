@@ -118,15 +118,14 @@ class Study(TrainingStages):
             ps = load_profiles(path)
             sets[name] = (ps.profiles, ps.labels, *([ps.extra["specimen"]] if "specimen" in ps.extra else []))
             acqs.append((path, acquisition_from_file(ps.extra, path)))
+        from ..generator.acquisition import resolve_acquisition
+
         stated = [(p, a) for p, a in acqs if a is not None]
         k = self.cfg.protocol.acquisition_ramps
-        for (p1, a1) in stated:
-            if a1.ramps != stated[0][1].ramps:
-                raise ValueError(f"{p1} says ramps_per_frame = {a1.ramps} but {stated[0][0]} says "
-                                 f"{stated[0][1].ramps}: one study is one acquisition")
-            if k is not None and a1.ramps != k:
-                raise ValueError(f"{p1} says ramps_per_frame = {a1.ramps} but {self.cfg.source}: "
-                                 f"protocol.acquisition_ramps = {k}")
+        given = None if k is None else Acquisition.measured(k)
+        for (p1, a1) in stated:  # the one file-against-setting rule: every file against the first, and the config
+            resolve_acquisition(a1, stated[0][1], str(p1), str(stated[0][0]))
+            resolve_acquisition(a1, given, str(p1), f"{self.cfg.source}: protocol.acquisition_ramps")
         acq = stated[0][1] if stated else Acquisition.measured(k or 1)
         return sets, acq
 
