@@ -30,12 +30,15 @@ measures profiles/s per epoch against the previous loop: on one CPU thread the l
 was not the cost (0.9-1.3x, within the shared machine's noise; the convolutions are),
 and batches above 256 gave no more profiles/s.
 
-Precision: ``precision`` "float32" (the default) or "bfloat16": the forward passes
+Precision: ``precision`` "float32" (the default), "bfloat16" or "auto" (bfloat16 on a
+CPU with native bfloat16 instructions, float32 elsewhere: :func:`resolve_precision`;
+the study's default, ``protocol.cnn_precision``): the forward passes
 under ``torch.autocast`` in bfloat16 (weights, gradients and Adam stay float32). On
 CPUs with bfloat16 instructions (AVX512-BF16, AMX) an epoch is faster; whether the
 accuracy holds is measured by ``tests/benchmarks/cnn_throughput.py --bf16`` (on the
 shared project machine's AVX512-BF16: 1.4-1.6x the profiles/s, accuracy 0.805 against
-0.807 after 8 epochs on 12,000 generator profiles). Opt-in: the default stays float32.
+0.807 after 8 epochs on 12,000 generator profiles; rerun 2026-11-26: 1.48x, 0.805
+against 0.807). The class default stays float32; the study asks for "auto".
 
 Device: ``device`` "auto" (a CUDA GPU when torch sees one, else the CPU), "cpu" or
 "cuda"; it is where a model runs, not what it is: it is not saved with the model
@@ -128,7 +131,20 @@ def split_indices(yi: np.ndarray, fractions=(0.8, 0.1, 0.1), groups=None, rng=No
     return tuple(np.sort(np.concatenate(p)) for p in parts)
 
 
-PRECISIONS = ("float32", "bfloat16")
+PRECISIONS = ("auto", "float32", "bfloat16")
+
+
+def resolve_precision(precision: str, device: str) -> str:
+    """'float32' or 'bfloat16' for ``precision`` in :data:`PRECISIONS` on ``device``
+    ('cpu' or 'cuda'): "auto" is bfloat16 on a CPU with native bfloat16 instructions
+    (AVX512-BF16, AMX: 1.4-1.6x the profiles/s of float32 here at the same accuracy,
+    ``tests/benchmarks/cnn_throughput.py --bf16``), float32 elsewhere."""
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {PRECISIONS}, got {precision!r}")
+    if precision != "auto":
+        return precision
+    native = device == "cpu" and bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
+    return "bfloat16" if native else "float32"
 
 
 def resolve_device(device: str = "auto") -> str:
@@ -196,7 +212,8 @@ class CNNClassifier(ProfileClassifier):
 
     def _autocast(self, device: str):
         """The forward pass's precision (:data:`PRECISIONS`): autocast in bfloat16, or nothing."""
-        return torch.autocast(device_type=device, dtype=torch.bfloat16, enabled=self.precision == "bfloat16")
+        return torch.autocast(device_type=device, dtype=torch.bfloat16,
+                              enabled=resolve_precision(self.precision, device) == "bfloat16")
 
     def _on_device(self) -> str:
         """The resolved device, with the network moved there."""

@@ -161,7 +161,7 @@ def run_calibrate(args) -> int:
         warn("calibrate", "one profile only: the posterior is weakly identified (the supported case is a handful "
                           "of measurements, typically 5)")
     if args.population:
-        return run_population(args, profiles, drones, settings, acquisition)
+        return run_population(args, profiles, drones, settings, acquisition, method)
     if method == "amortized":
         return run_amortized(args, profiles, drones, settings, acquisition, cls)
     if len(set(drones.tolist())) > 1:
@@ -207,20 +207,25 @@ REUSE_FIELD = "population_reuse"
 """Where a drone's posterior of ``--population`` records the options it was made with."""
 
 
-def reuse_key(engines, seed: int, settings, acquisition) -> dict:
+def reuse_key(engines, seed: int, settings, acquisition, method: str = "likelihood", estimator=None) -> dict:
     """Every option that changes a drone's posterior (not threads nor progress bars):
     a rerun reuses the posterior only when all of them, and the measurements, agree."""
     import json
 
+    if method == "amortized":  # the estimator and the seed say it all
+        return json.loads(json.dumps({"method": method, "estimator": str(estimator or "shipped"), "seed": int(seed),
+                                      "acquisition": acquisition.to_dict()}))
     options = {k: v for k, v in settings.to_dict().items() if k not in ("threads", "progress")}
     return json.loads(json.dumps({"engines": engines, "seed": int(seed), "sampler": options.pop("sampler"),
                                   "settings": options, "acquisition": acquisition.to_dict()}))
 
 
-def run_population(args, profiles, drones, settings, acquisition) -> int:
+def run_population(args, profiles, drones, settings, acquisition, method: str = "likelihood") -> int:
     """Each drone calibrated on its own (kept beside OUT, reused by a rerun on the same
     data with the same options: :func:`reuse_key`), then the class's population
-    (:func:`mdaug.inference.population.result.calibrate_population`)."""
+    (:func:`mdaug.inference.population.result.calibrate_population`). ``method``
+    "amortized": each drone's posterior is the trained estimator's (no emcee route:
+    the population uses the amortized draws), else the closed-form route."""
     import json
 
     import numpy as np
@@ -232,7 +237,7 @@ def run_population(args, profiles, drones, settings, acquisition) -> int:
     from ..radar import RadarConfig
     from ..radar.seeds import child_seed
 
-    if args.engines == "auto":
+    if args.engines == "auto" and method != "amortized":
         raise ValueError("--population calibrates every drone with one engine count: give --engines N, not auto")
     ids = list(dict.fromkeys(drones.tolist()))
     cls = args.class_name.upper()
@@ -243,7 +248,7 @@ def run_population(args, profiles, drones, settings, acquisition) -> int:
     for k, drone in enumerate(ids):
         path, rows = drone_path(args.out, drone), profiles[drones == drone]
         seed = child_seed(args.seed, "drone", drone)
-        key = reuse_key(args.engines, seed, settings, acquisition)
+        key = reuse_key(args.engines, seed, settings, acquisition, method, args.estimator)
         res = None
         if path.is_file():
             old = CalibrationResult.load(path, class_name=cls)
@@ -260,8 +265,15 @@ def run_population(args, profiles, drones, settings, acquisition) -> int:
                 info(f"drone {drone}: {path} was calibrated with other {', '.join(changed)}; calibrating again")
         if res is None:
             info(f"drone {drone} ({k + 1} of {len(ids)}): calibrating from {len(rows)} profile(s)")
-            res = calibrate(rows, cls, engines=args.engines, settings=settings, acquisition=acquisition,
-                            random_state=seed, backend_path=Path(f"{path}.chain.h5")).record_specimens([drone])
+            if method == "amortized":
+                from ..inference.amortized.calibrate import calibrate_amortized
+
+                res = calibrate_amortized(rows, cls, acquisition=acquisition, estimator=args.estimator,
+                                          settings=settings, random_state=seed, emcee=False,
+                                          source=f"{args.measured} (drone {drone})").record_specimens([drone])
+            else:
+                res = calibrate(rows, cls, engines=args.engines, settings=settings, acquisition=acquisition,
+                                random_state=seed, backend_path=Path(f"{path}.chain.h5")).record_specimens([drone])
             res.meta[REUSE_FIELD] = key  # what a rerun must match to reuse this posterior
             res.idata.posterior.attrs["mdaug"] = json.dumps(res.meta)
             res.save(path)
@@ -333,7 +345,7 @@ def add_calibrate(sub, parents, help):
                    help="amortized: the class's trained estimator (simulation-based; the amortized posterior, "
                         "and nlopt + emcee on the likelihood learned from the same simulations); likelihood: "
                         "the closed-form likelihood with nlopt + a sampler (auto: amortized for measured "
-                        "acquisitions, likelihood for the published single chirp and --population) (default: %(default)s)")
+                        "acquisitions, likelihood for the published single chirp) (default: %(default)s)")
     g.add_argument("--estimator", type=Path, default=None,
                    help="estimator ZIP of mdaug train-estimator (default: the shipped one for the class and K)")
     g.add_argument("--route", choices=("amortized", "emcee"), default=None,

@@ -17,11 +17,11 @@ CLOSED_FORM_ONLY = ("likelihood", "draws", "ramps_drawn", "fit_budget", "fit_alg
 def calibration_method(args, acquisition) -> str:
     """'amortized' (the trained estimator; default for measured acquisitions, whose
     phases are random) or 'likelihood' (the closed-form / fitted-phase likelihood; the
-    default for the published single chirp at fixed phases, and with --population).
+    default for the published single chirp at fixed phases).
     Refuses likelihood-only options with the amortized method, by name."""
     method = args.method
     if method == "auto":
-        method = "amortized" if acquisition.phases == "uniform" and not args.population else "likelihood"
+        method = "amortized" if acquisition.phases == "uniform" else "likelihood"
     if method == "amortized":
         if acquisition.phases != "uniform":
             raise ValueError("--method amortized: the estimators are trained on measured acquisitions (random "

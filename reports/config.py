@@ -82,6 +82,7 @@ class ProtocolConfig:
     cnn_n_per_class: int = 6000     # 12,000 profiles
     cnn_epochs: int = 40
     cnn_patience: int | None = 8    # early stopping on validation loss; None trains all epochs
+    cnn_precision: str = "auto"     # auto: bfloat16 autocast on CPUs with native bfloat16 (1.5x, same accuracy), else float32
     tsaug_n_per_class: int = 3000
     tsaug_epochs: int = 60
     strategies: tuple[str, ...] = STRATEGIES
@@ -197,6 +198,9 @@ class StudyConfig:
         _check_names(src, "protocol.calibration_method", (p.calibration_method,), ("auto", "amortized", "likelihood"))
         _check_names(src, "protocol.models", p.models, ("svm", "nb", "xgb", "cnn"))
         _check_names(src, "protocol.normalisation", (p.normalisation,), NORMALISATIONS)
+        from ..classify.cnn import PRECISIONS
+
+        _check_names(src, "protocol.cnn_precision", (p.cnn_precision,), PRECISIONS)
         _check_names(src, "protocol.strategies", p.strategies, STRATEGIES)
         if p.cnn_patience is not None and p.cnn_patience < 1:
             raise ValueError(f"{src}: protocol.cnn_patience must be >= 1 (leave it out to train every epoch)")

@@ -81,7 +81,8 @@ class Study(TrainingStages):
                                                                      "sweep_n_per_class", "strategies",
                                                                      "through_chain", "normalisation", "n_boot")])
         self.cnn_key = settings_key(self.cand_key, [p[k] for k in ("cnn_n_per_class", "cnn_epochs", "cnn_patience",
-                                                                   "tsaug_n_per_class", "tsaug_epochs")])
+                                                                   "tsaug_n_per_class", "tsaug_epochs",
+                                                                   "cnn_precision")])
         # the key without n_boot: the stages store predictions, scored afterwards
 
     # ---- stage 1: data -------------------------------------------------------------

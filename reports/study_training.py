@@ -56,6 +56,7 @@ class TrainingStages:
                          "seed": seed, "run_seeds": run_seeds(seed, self.cfg.seed, p.cnn_seeds, "cnn", name),
                          "model_params": {"epochs": p.tsaug_epochs if tsaug else p.cnn_epochs,
                                           "patience": p.cnn_patience, "normalisation": p.normalisation,
+                                          "precision": p.cnn_precision,
                                           "device": self.cfg.device},
                          "model_path": str(self.out / "models" / f"cnn_{name}_run{{run}}.zip")}
         return out
@@ -108,7 +109,8 @@ class TrainingStages:
             work = []
             for model in CEILING_MODELS:  # the CNN: like for like with the strategies' CNNs
                 first = child_seed(self.cfg.seed, "ceiling", model)
-                params = {"epochs": p.cnn_epochs, "patience": p.cnn_patience, "device": self.cfg.device} \
+                params = {"epochs": p.cnn_epochs, "patience": p.cnn_patience, "device": self.cfg.device,
+                          "precision": p.cnn_precision} \
                     if model == "cnn" else {}
                 for seed in run_seeds(first, self.cfg.seed, p.cnn_seeds if model == "cnn" else 1, "ceiling", model):
                     work.append({"model": model, "seed": seed, "params": params, "X": X, "y": y, "tests": sets,
@@ -123,4 +125,4 @@ class TrainingStages:
                     m["predictions"][n].append(res["predictions"][n])
             return result
         return self.cache.run("ceiling", settings_key(self.key, sim.ceiling_per_class, p.cnn_seeds, p.cnn_epochs,
-                                                      p.cnn_patience), compute)
+                                                      p.cnn_patience, p.cnn_precision), compute)

@@ -88,3 +88,27 @@ def test_bfloat16_autocast_is_opt_in_reproducible_and_saved(tmp_path):
     back = load_model(tmp_path / "bf16.zip")
     assert back.precision == "bfloat16"
     assert np.array_equal(back.predict_proba(x), a.predict_proba(x))
+
+
+def test_auto_precision_is_bfloat16_only_where_the_cpu_has_it_natively():
+    from mdaug.classify.cnn import resolve_precision
+
+    native = bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
+    assert resolve_precision("auto", "cpu") == ("bfloat16" if native else "float32")
+    assert resolve_precision("auto", "cuda") == "float32"
+    assert resolve_precision("float32", "cpu") == "float32" and resolve_precision("bfloat16", "cpu") == "bfloat16"
+    with pytest.raises(ValueError, match="precision must be one of"):
+        CNNClassifier(precision="fp16")
+
+
+def test_auto_precision_trains_saves_and_predicts(tmp_path):
+    """A CNN with precision 'auto' learns the easy toy task, saves 'auto' (resolved where it
+    runs) and the loaded model predicts the same labels."""
+    x, y = _data(400)
+    m = make_classifier("cnn", random_state=1, epochs=20, batch_size=32, precision="auto", device="cpu",
+                        progress=False).fit(x, y)
+    assert np.mean(m.predict(x) == y) > 0.9
+    save_model(m, tmp_path / "m.zip")
+    back = load_model(tmp_path / "m.zip")
+    assert back.precision == "auto"
+    assert np.array_equal(back.predict(x), m.predict(x))

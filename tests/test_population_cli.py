@@ -8,7 +8,7 @@ import pytest
 from mdaug.cli import main
 from mdaug.inference.population.result import PopulationResult
 
-FAST = ["--sampler", "laplace", "--starts", "1", "--fit-budget", "60", "--particles", "200", "--allow-unconverged"]
+FAST = ["--method", "likelihood", "--sampler", "laplace", "--starts", "1", "--fit-budget", "60", "--particles", "200", "--allow-unconverged"]
 
 
 @pytest.fixture(scope="module")
@@ -41,6 +41,25 @@ def test_calibrate_population_keeps_each_drone_and_reuses_it(drones, capsys):
         assert z["profiles"].shape == (50, 400)
         settings = json.loads(str(z["settings"]))
     assert settings["strategy"] == "population" and settings["posteriors"] == {"HELI": str(out)}
+
+
+def test_population_from_the_trained_estimator_by_default(drones, capsys):
+    """--population on measured (K = 4) acquisitions: each drone's posterior is the shipped
+    estimator's (seconds, no chain), the population is built on them, a rerun reuses them."""
+    out = drones / "pop_amortized.npz"
+    assert main(["calibrate", str(drones / "d.npz"), "--class", "HELI", "--population", "--seed", "4",
+                 "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "population of HELI: 2 drone(s) (0, 1)" in text
+    from mdaug.inference.result.posterior import CalibrationResult
+    drone = CalibrationResult.load(drones / "pop_amortized.npz.drone-0.nc")
+    assert drone.amortized and drone.specimens == ["0"] and drone.diagnostics["sampler"] == "amortized"
+    pop = PopulationResult.load(out, class_name="HELI")
+    assert pop.n_drones == 2 and pop.spreads().shape[1] == 5 and np.all(pop.spreads() > 0)
+    assert main(["calibrate", str(drones / "d.npz"), "--class", "HELI", "--population", "--seed", "4",
+                 "--out", str(out)]) == 0
+    again = capsys.readouterr().out
+    assert "drone 0: reused" in again and "drone 1: reused" in again
 
 
 @pytest.mark.slow

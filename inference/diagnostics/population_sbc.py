@@ -1,22 +1,29 @@
 """Simulation-based calibration of the population (Talts et al. 2018, one level up).
 
 Each replicate: spreads drawn from the hyperprior; ``n_drones + 1`` drones of the
-class drawn around its reference by the scene simulator's specimen model with those
+class drawn around a class mean by the scene simulator's specimen model with those
 spreads, ``n_acquisitions`` acquisitions of each through the scene simulator and
 the radar chain (:func:`~mdaug.generator.chain.simulate_campaign`); the first
-``n_drones`` calibrated one by one, then their population
-(:func:`..population.result.calibrate_population`); the last drone is the one not
-seen. Ranks among ``n_rank`` draws of:
+``n_drones`` calibrated one by one (``method`` "amortized": the shipped estimator's
+posterior, milliseconds; "likelihood": the closed-form route of ``settings``), then
+their population (:func:`..population.result.calibrate_population`); the last drone
+is the one not seen. Ranks among ``n_rank`` draws of:
 
 * each spread, among the hyper-posterior's draws;
 * the unseen drone's label-free lines (:func:`.sbc.sbc_quantities`: each engine's
   line frequencies sorted, their amplitudes, the Gamma ratios), among new drones
   drawn from the population (:meth:`..population.result.PopulationResult.draw_drones`).
 
-The class mean is the reference in every replicate. That is a valid SBC of both
-because the class mean has a flat prior: the spreads' marginal likelihood does not
-depend on where the drones sit, and the mean's Gaussian posterior under a flat
-prior has exact frequentist coverage.
+The class mean: with the amortized drones, drawn from the calibration prior the
+estimator was trained on (the box of :class:`..space.priors.Priors`, through
+:class:`..amortized.target.DroneSpace`), redrawn until every drone lies inside it
+(the estimator refuses data from outside; the truths are then the prior truncated to
+drones it can calibrate). A drone's posterior is that prior times its likelihood, so
+the truths must come from it: with a mean fixed at the reference, coordinates no
+drone identifies would rank the reference among prior-wide draws (a central rank
+every time: measured, outer share 0.00 over 4 populations). With the closed form,
+the class mean is the reference in every replicate (its drones' posteriors are
+summarised only where identified, where the mean's flat prior gives exact coverage).
 """
 from __future__ import annotations
 
@@ -33,7 +40,7 @@ from ..settings import CalibrationSettings
 
 def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n_drones: int,
                          n_acquisitions: int, ramps: int, settings: CalibrationSettings, hyperprior: Hyperprior,
-                         n_rank: int) -> dict:
+                         n_rank: int, method: str = "amortized") -> dict:
     """One population SBC replicate (module doc): ranks of the spreads and of the unseen drone's lines."""
     from ...generator.chain import SceneConfig, simulate_campaign
     from ...generator.specimens import SpecimenSpread
@@ -44,10 +51,29 @@ def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n
     spreads = hyperprior.sample(1, np.random.default_rng(truth_ss))[0]
     scene = SceneConfig(n_ramps=ramps, specimens=SpecimenSpread(**dict(zip(SPREADS, spreads.tolist()))))
     t0 = time.perf_counter()
-    camp = simulate_campaign(ref, n_drones + 1, (n_drones + 1) * n_acquisitions, int(data_ss.generate_state(1)[0]),
-                             scene=scene)
-    results = [calibrate(camp.profiles[camp.specimen == d], ref, acquisition=camp.acquisition, settings=settings,
-                         random_state=seed_sequence(run_ss, d)) for d in range(n_drones)]
+    mean = ref
+    if method == "amortized":  # the class mean from the calibration prior the drones' posteriors were trained on
+        from ..amortized.target import DroneSpace
+        from ..space.priors import Priors
+
+        space = DroneSpace(ref.n_engines, Priors.from_reference(ref))
+        mean_rng = np.random.default_rng(truth_ss.spawn(1)[0])
+    for attempt in range(100):  # amortized: every drone inside the prior's support (the truths it was trained on)
+        if method == "amortized":
+            mean = ClassParams.from_array(space.vectors(space.sample_prior(1, mean_rng))[0], name=ref.name)
+        camp = simulate_campaign(mean, n_drones + 1, (n_drones + 1) * n_acquisitions,
+                                 int(data_ss.generate_state(attempt + 1)[attempt]), scene=scene)
+        if method != "amortized" or np.all(np.isfinite(space.log_prior(space.from_vectors(camp.specimen_params)))):
+            break
+    if method == "amortized":  # the shipped estimator's posterior per drone (milliseconds; no emcee route)
+        from ..amortized.calibrate import calibrate_amortized
+
+        results = [calibrate_amortized(camp.profiles[camp.specimen == d], ref, acquisition=camp.acquisition,
+                                       random_state=seed_sequence(run_ss, d), emcee=False, n_draws=2000)
+                   for d in range(n_drones)]
+    else:
+        results = [calibrate(camp.profiles[camp.specimen == d], ref, acquisition=camp.acquisition,
+                             settings=settings, random_state=seed_sequence(run_ss, d)) for d in range(n_drones)]
     pop = calibrate_population(results, random_state=pop_ss)
     hyper = pop.spreads()
     pick = np.linspace(0, len(hyper) - 1, n_rank).round().astype(int)
@@ -63,7 +89,7 @@ def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n
 def run_population_sbc(reference: ClassParams | str = "HELI", n_replicates: int = 50, *, n_drones: int = 3,
                        n_acquisitions: int = 5, ramps: int = 32, settings: CalibrationSettings | None = None,
                        hyperprior: Hyperprior | None = None, seed=0, n_rank: int = 99, n_bins: int = 5,
-                       checkpoint=None, workers: int = 1, progress=None) -> dict:
+                       checkpoint=None, workers: int = 1, progress=None, method: str = "amortized") -> dict:
     """Population SBC (module doc): :func:`.sbc.summarise` of the ranks, separately for
     the spreads (``spreads``) and the unseen drone's lines (``new_drone``), plus all
     (``all``). Resumable (``checkpoint``, JSON lines) and spread over ``workers``."""
@@ -71,9 +97,9 @@ def run_population_sbc(reference: ClassParams | str = "HELI", n_replicates: int 
     settings = settings or CalibrationSettings(sampler="laplace")
     hyperprior = hyperprior or Hyperprior.stated()
     key = ["population", ref.name, n_replicates, n_drones, n_acquisitions, ramps, settings.to_dict(),
-           hyperprior.scales, str(seed), n_rank]
+           hyperprior.scales, str(seed), n_rank] + ([] if method == "likelihood" else [method])
     recs = run_replicates(population_replicate, (ref,),
-                          (n_drones, n_acquisitions, ramps, settings, hyperprior, n_rank), key, n_replicates, seed,
+                          (n_drones, n_acquisitions, ramps, settings, hyperprior, n_rank, method), key, n_replicates, seed,
                           checkpoint=checkpoint, workers=workers, progress=progress)
     out = {"all": summarise(recs, n_rank, n_bins)}
     for part, prefix in (("spreads", "spread:"), ("new_drone", "new:")):

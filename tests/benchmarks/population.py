@@ -4,10 +4,12 @@
 Prints, with 1 thread:
 1. cost of the stages of one population (HELI, ``--drones`` drones x
    ``--acquisitions`` acquisitions at K = ``--ramps``): each drone's calibration
-   (fit + ``--sampler``), the hyper-posterior, 10,000 new drones;
+   (fit + ``--sampler``, the closed form), the hyper-posterior, 10,000 new drones;
 2. simulation-based calibration of the population (``--replicates`` populations:
    spreads from the hyperprior, drones drawn by the scene simulator's specimen
-   model, acquisitions through the scene simulator and the chain, a drone held out):
+   model, acquisitions through the scene simulator and the chain, each drone
+   calibrated by ``--method``: the shipped amortized estimator or the closed form, a
+   drone held out):
    outer-10% share (honest: 0.10; pass 0.04-0.16) and pooled chi-square p for the
    spreads and for the unseen drone's lines, seconds per population. Resumable
    (``--checkpoint``) and spread over ``--workers`` processes.
@@ -64,11 +66,11 @@ def section_sbc(args):
     from mdaug.inference.diagnostics.population_sbc import run_population_sbc
 
     print(f"\n== 2. population SBC ({args.cls}): {args.replicates} populations of {args.drones} drones x "
-          f"{args.acquisitions} acquisitions, K = {args.ramps}, sampler {args.sampler}; {args.workers} worker(s); "
+          f"{args.acquisitions} acquisitions, K = {args.ramps}, drones by {args.method}; {args.workers} worker(s); "
           f"resumable from {args.checkpoint}")
     out = run_population_sbc(args.cls, args.replicates, n_drones=args.drones, n_acquisitions=args.acquisitions,
                              ramps=args.ramps, settings=settings_from(args), seed=args.seed, n_rank=49,
-                             checkpoint=args.checkpoint, workers=args.workers)
+                             checkpoint=args.checkpoint, workers=args.workers, method=args.method)
     for part in ("spreads", "new_drone", "all"):
         s = out[part]
         verdict = "pass" if 0.04 <= s["outer_share"] <= 0.16 and s["pooled_p"] > 0.01 else "FAIL"
@@ -89,6 +91,8 @@ def main():
     ap.add_argument("--drones", type=int, default=3)
     ap.add_argument("--acquisitions", type=int, default=5)
     ap.add_argument("--ramps", type=int, default=32)
+    ap.add_argument("--method", default="amortized", choices=("amortized", "likelihood"),
+                    help="each drone's calibration: the shipped estimator (default) or the closed form (--sampler)")
     ap.add_argument("--sampler", default="laplace")
     ap.add_argument("--starts", type=int, default=2)
     ap.add_argument("--fit-budget", type=int, default=1500)
