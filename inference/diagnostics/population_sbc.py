@@ -43,6 +43,7 @@ def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n
                          n_rank: int, method: str = "amortized") -> dict:
     """One population SBC replicate (module doc): ranks of the spreads and of the unseen drone's lines."""
     from ...generator.chain import SceneConfig, simulate_campaign
+    from ...generator.chain.scene import draw_specimens
     from ...generator.specimens import SpecimenSpread
     from ..calibrate import calibrate
     from ..population.result import calibrate_population
@@ -58,13 +59,18 @@ def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n
 
         space = DroneSpace(ref.n_engines, Priors.from_reference(ref))
         mean_rng = np.random.default_rng(truth_ss.spawn(1)[0])
-    for attempt in range(100):  # amortized: every drone inside the prior's support (the truths it was trained on)
-        if method == "amortized":
-            mean = ClassParams.from_array(space.vectors(space.sample_prior(1, mean_rng))[0], name=ref.name)
-        camp = simulate_campaign(mean, n_drones + 1, (n_drones + 1) * n_acquisitions,
-                                 int(data_ss.generate_state(attempt + 1)[attempt]), scene=scene)
-        if method != "amortized" or np.all(np.isfinite(space.log_prior(space.from_vectors(camp.specimen_params)))):
+    data_seed = int(data_ss.generate_state(1)[0])
+    for attempt in range(1000):  # amortized: every drone inside the prior's support (the truths it was trained on)
+        if method != "amortized":
             break
+        mean = ClassParams.from_array(space.vectors(space.sample_prior(1, mean_rng))[0], name=ref.name)
+        data_seed = int(data_ss.generate_state(attempt + 1)[attempt])
+        # the drones simulate_campaign will draw from this seed (its first spawned stream), checked before the chain
+        drones = draw_specimens(mean.to_array(), n_drones + 1, scene,
+                                np.random.default_rng(seed_sequence(data_seed).spawn(3)[0]))
+        if np.all(np.isfinite(space.log_prior(space.from_vectors(drones)))):
+            break
+    camp = simulate_campaign(mean, n_drones + 1, (n_drones + 1) * n_acquisitions, data_seed, scene=scene)
     if method == "amortized":  # the shipped estimator's posterior per drone (milliseconds; no emcee route)
         from ..amortized.calibrate import calibrate_amortized
 
