@@ -93,7 +93,7 @@ def test_a_drone_posterior_is_reused_only_under_the_same_options():
     """calibrate --population reuses a drone's posterior when the measurements and every
     option that changes it agree (engines, seed, sampler, settings, acquisition with its
     noise), not threads or progress bars."""
-    from mdaug.cli.calibrate import reuse_key
+    from mdaug.cli.calibrate_population import reuse_key
     from mdaug.generator.acquisition import Acquisition
     from mdaug.inference.settings import CalibrationSettings
 
