@@ -194,3 +194,20 @@ def test_study_data_keeps_each_calibration_drone(tmp_path):
     assert "no strategy was calibrated on" in study.selection_set(study.data())[2]
     job = study._calibration_job("HELI", study.acquisition(study.data()))
     assert job["drones"].tolist() == drones.tolist() and len(job["profiles"]) == 2 * n_cal
+
+
+def test_population_sbc_compares_engines_in_a_label_free_order():
+    """The unseen drone's per-engine quantities do not depend on which engine is called 0:
+    any permutation of a QUAD's engines gives the same ordered vector (lowest line first)."""
+    from mdaug.generator import load_reference
+    from mdaug.inference.diagnostics.population_sbc import engines_in_order
+    from mdaug.inference.diagnostics.sbc import sbc_quantities
+    from mdaug.inference.space.priors import engine_lines
+
+    x = load_reference("QUAD").to_array().reshape(4, 13)
+    base = engines_in_order(x.ravel())
+    for perm in ([3, 2, 1, 0], [1, 0, 3, 2], [2, 3, 0, 1]):
+        assert np.array_equal(engines_in_order(x[perm].ravel()), base)
+    w, _, _ = engine_lines(base.reshape(1, 4, 13))
+    assert np.all(np.diff(w.min(axis=-1)[0]) >= 0)
+    assert np.array_equal(sbc_quantities(engines_in_order(x[[3, 1, 2, 0]].ravel()))[0], sbc_quantities(base)[0])

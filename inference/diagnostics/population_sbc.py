@@ -11,7 +11,8 @@ is the one not seen. Ranks among ``n_rank`` draws of:
 
 * each spread, among the hyper-posterior's draws;
 * the unseen drone's label-free lines (:func:`.sbc.sbc_quantities`: each engine's
-  line frequencies sorted, their amplitudes, the Gamma ratios), among new drones
+  line frequencies sorted, their amplitudes, the Gamma ratios; the engines in the
+  order of their lowest line, :func:`engines_in_order`), among new drones
   drawn from the population (:meth:`..population.result.PopulationResult.draw_drones`).
 
 The class mean: with the amortized drones, drawn from the calibration prior the
@@ -31,11 +32,25 @@ import time
 
 import numpy as np
 
-from ...generator import ClassParams, load_reference
+from ...generator import N_PARAMS, ClassParams, load_reference
 from ...radar.seeds import seed_sequence
 from ..population.model import SPREADS, Hyperprior
+from ..space.priors import engine_lines
 from .sbc import run_replicates, sbc_quantities, summarise
 from ..settings import CalibrationSettings
+
+
+def engines_in_order(x: np.ndarray) -> np.ndarray:
+    """Class vectors (n, 13E) with each vector's engines ordered by their lowest line
+    frequency: which engine a simulator or a population calls 0 is a label, and the
+    ranks of a per-engine quantity compare like with like only in a label-free order
+    (any fixed function of the parameters is a valid SBC quantity)."""
+    x = np.atleast_2d(np.asarray(x, float))
+    n, e = len(x), x.shape[1] // N_PARAMS
+    xe = x.reshape(n, e, N_PARAMS)
+    w, _, _ = engine_lines(xe)
+    order = np.argsort(w.min(axis=-1), axis=1)
+    return np.take_along_axis(xe, order[:, :, None], axis=1).reshape(n, -1)
 
 
 def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n_drones: int,
@@ -83,8 +98,8 @@ def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n
     pop = calibrate_population(results, random_state=pop_ss)
     hyper = pop.spreads()
     pick = np.linspace(0, len(hyper) - 1, n_rank).round().astype(int)
-    new_true, line_names = sbc_quantities(camp.specimen_params[n_drones])
-    new_draws, _ = sbc_quantities(pop.draw_drones(n_rank, np.random.default_rng(draw_ss)))
+    new_true, line_names = sbc_quantities(engines_in_order(camp.specimen_params[n_drones]))
+    new_draws, _ = sbc_quantities(engines_in_order(pop.draw_drones(n_rank, np.random.default_rng(draw_ss))))
     ranks = np.concatenate([np.sum(hyper[pick] < spreads, axis=0), np.sum(new_draws < new_true, axis=0)])
     return {"i": i, "ranks": ranks.tolist(), "names": [f"spread:{n}" for n in SPREADS] + [f"new:{n}" for n in line_names],
             "converged": bool(pop.converged and all(r.converged for r in results)),
