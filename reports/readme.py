@@ -136,13 +136,24 @@ def results_section(results: dict) -> str:
                      "–", *_cells(w, results["ceiling"]["models"][ceil["model"]]["tests"][test], classes), label(v)]
             lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
-    cal = ["Calibration: " + "; ".join(
-        f"{c} {'converged' if v['converged'] else 'NOT converged'} (chain "
-        f"{fmt(v['diagnostics'].get('steps_over_tau'), 1)} x max tau, "
-        f"min ESS {fmt(v['diagnostics'].get('ess_min'), 0)})"
-        for c, v in results["calibration"].items()) + "."]
+    cal = ["Calibration: " + "; ".join(_calibration_text(c, v, fmt) for c, v in results["calibration"].items()) + "."]
     lines += cal + ["", END]
     return "\n".join(lines)
+
+
+def _calibration_text(cls: str, v: dict, fmt) -> str:
+    """One class's calibration in a line: the amortized posterior (exact draws of the
+    estimator, its SBC) and the emcee route beside it, or the chain of the closed form."""
+    d = v["diagnostics"]
+    chain = (f"{fmt(d.get('steps_over_tau'), 1)} x max tau, min ESS {fmt(d.get('ess_min'), 0)}")
+    if d.get("sampler") == "amortized":
+        sbc = ((d.get("estimator") or {}).get("sbc") or {}).get("amortized") or {}
+        lo, hi = sbc.get("coverage90_range") or (None, None)
+        em = d.get("emcee") or {}
+        return (f"{cls} amortized posterior (the shipped estimator's exact draws; its SBC: outer-10% share "
+                f"{fmt(sbc.get('outer_share'), 3)}, 90% coverage {fmt(lo, 2)}-{fmt(hi, 2)}); the emcee route "
+                f"beside it {'converged' if em.get('converged') else 'NOT converged'} ({chain})")
+    return f"{cls} {'converged' if v['converged'] else 'NOT converged'} (chain {chain})"
 
 
 def replace_section(text: str, section: str) -> str:

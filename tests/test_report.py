@@ -444,3 +444,18 @@ def test_precision_undefined_in_some_runs_is_their_mean_and_says_over_how_many(t
     cells = re.findall(r"<td[^>]*>(.*?)</td>", row, flags=re.S)
     assert 'data-key="strategies.sigma_p_fit.tests.new.per_class.HELI.precision"' in cells[6]
     assert "2 of 3 runs" in cells[6] and "of 3 runs" not in cells[7]
+
+
+def test_readme_calibration_line_tells_the_amortized_posterior_from_its_emcee_route(tmp_path):
+    """An amortized calibration is reported as the estimator's draws with its SBC, and the
+    emcee route beside it keeps its own verdict (a 400-step chain is NOT converged)."""
+    results = synthetic_results(tmp_path)
+    cls = next(iter(results["calibration"]))
+    results["calibration"][cls]["converged"] = True
+    results["calibration"][cls]["diagnostics"] = {
+        "sampler": "amortized", "steps_over_tau": 17.6, "ess_min": 466.0,
+        "estimator": {"sbc": {"amortized": {"outer_share": 0.114, "coverage90_range": [0.83, 0.91]}}},
+        "emcee": {"converged": False}}
+    line = next(x for x in results_section(results).splitlines() if x.startswith("Calibration:"))
+    assert (f"{cls} amortized posterior (the shipped estimator's exact draws; its SBC: outer-10% share 0.114, "
+            "90% coverage 0.83-0.91); the emcee route beside it NOT converged (17.6 x max tau") in line
