@@ -199,15 +199,15 @@ def log_marginal(spreads: np.ndarray, drones: list[DroneSummary], model: Populat
 
 def sample_spreads(drones: list[DroneSummary], model: PopulationModel, hyperprior: Hyperprior, rng, *,
                    n_walkers: int = 32, min_tau_multiple: float = 50.0, max_steps: int = 40000,
-                   block: int = 1000) -> dict:
-    """emcee on ln(spreads) until the chain is ``min_tau_multiple`` tau long (or
-    ``max_steps``): returns spreads (n, 5) and mu (n, q) draws (mu from its Gaussian
-    conditional given each spread draw), the measured mask (p,), tau, steps and
-    whether it converged."""
-    import emcee
-
-    from ...radar.progress import progress_bar
-    from ..samplers.toolbox import estimate_tau
+                   block: int = 1000, time_budget: float | None = None, progress: bool | None = False) -> dict:
+    """emcee on ln(spreads) through the one driver and its convergence rule
+    (:func:`..samplers.emcee_run.run_ensemble`: blocks of ``block`` steps, at least
+    ``min_tau_multiple`` tau with tau stable, else ``max_steps`` or ``time_budget``
+    and flagged): returns spreads (n, 5) and mu (n, q) draws (mu from its Gaussian
+    conditional given each spread draw), the measured mask (p,), tau, steps, whether
+    it converged and why."""
+    from ..samplers.emcee_run import run_ensemble
+    from ..settings import CalibrationSettings
 
     measured = np.any([d.mask for d in drones], axis=0)  # none: the spreads keep their prior
 
@@ -220,23 +220,11 @@ def sample_spreads(drones: list[DroneSummary], model: PopulationModel, hyperprio
         return out
 
     u0 = np.log(hyperprior.sample(n_walkers, rng) + 1e-6)
-    sampler = emcee.EnsembleSampler(n_walkers, len(SPREADS), log_post, vectorize=True,
-                                    moves=[(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)])
-    state = emcee.State(u0, random_state=np.random.RandomState(int(rng.integers(2**31 - 1))).get_state())
-    steps, tau = 0, np.full(len(SPREADS), np.inf)
-    with progress_bar(total=max_steps, desc="population spreads", unit="step") as bar:
-        while steps < max_steps:
-            state = sampler.run_mcmc(state, min(block, max_steps - steps), progress=False)
-            bar.update(sampler.iteration - steps)
-            steps = sampler.iteration
-            tau = estimate_tau(sampler.get_chain())
-            bar.set_postfix(tau=f"{tau.max():.0f}", need=f"{min_tau_multiple * tau.max():.0f}")
-            if steps >= min_tau_multiple * tau.max():
-                break
-    converged = bool(steps >= min_tau_multiple * tau.max())
-    t = float(np.max(tau))
-    burn, thin = int(min(steps // 3, 3 * t)), max(1, int(t / 2))
-    u = sampler.get_chain(discard=burn, thin=thin, flat=True)
+    settings = CalibrationSettings(max_steps=max_steps, time_budget=time_budget, check_every=block,
+                                   min_tau_multiple=min_tau_multiple, relabel=0.0, store_every=1,
+                                   progress=bool(progress))
+    run = run_ensemble(log_post, u0, settings, int(rng.integers(2**31 - 1)))
+    u = run.draws()
     spreads = np.exp(u)
     mu = np.empty((len(u), int(measured.sum())))
     for s in range(0, len(u) if measured.any() else 0, 512):  # mu | spreads ~ N(mu_hat, P^-1)
@@ -244,5 +232,6 @@ def sample_spreads(drones: list[DroneSummary], model: PopulationModel, hyperprio
         chol = np.linalg.cholesky(P)  # P = L L^T: mu = mu_hat + L^-T z
         z = rng.standard_normal(mu_hat.shape)
         mu[s:s + 512] = mu_hat + np.linalg.solve(np.swapaxes(chol, 1, 2), z[..., None])[..., 0]
+    tau, steps, converged = run.tau, run.n_steps, run.converged
     return {"spreads": spreads, "mu": mu, "measured": measured, "tau": tau, "steps": int(steps),
-            "converged": converged, "acceptance": float(np.mean(sampler.acceptance_fraction))}
+            "converged": bool(converged), "acceptance": float(np.mean(run.acceptance)), "reason": run.reason}
