@@ -16,17 +16,20 @@ The simulator multiplies by (1 + N(0, spread)); its log is N(0, spread^2) to fir
 order (at 15%: sd 0.151, mean -0.011), the one approximation of the model.
 
 Inference (what was chosen and why): each drone is calibrated on its own (the
-closed-form likelihood, :mod:`..calibrate`); its posterior draws, relabelled to the
+class's trained estimator by default, :mod:`..amortized.calibrate`, or the closed-form
+route of :mod:`..calibrate`); its posterior draws, relabelled to the
 class reference's labelling (:func:`..space.priors.align_lines`), are summarised as a
 Gaussian in y on the coordinates the drone identifies (posterior sd <= 0.5 prior
 sd), with the role-space prior divided out (uniform in A, w, C: a tilt e^y in log
 coordinates, whose Gaussian quotient shifts the mean by -S 1). With Gaussian drone
 likelihoods and a flat prior on mu, mu integrates out in closed form (a normal-
 normal model), and the hyper-posterior of the five spreads is a 5-dimensional
-density that emcee samples in milliseconds per step. Importance reweighting of
-per-drone samples (as in gravitational-wave population analyses) was not used: a
+density that emcee samples in milliseconds per step, through the one driver and
+convergence rule of :func:`..samplers.emcee_run.run_ensemble`. Importance reweighting
+of per-drone samples (as in gravitational-wave population analyses) was not used: a
 drone's posterior is several times wider than the population spreads in 8-35
-coordinates, so the weights of a few thousand draws are degenerate.
+coordinates (an amortized HELI drone's line frequencies: 0.27-0.34 x the prior's sd,
+against spreads of 2-15%), so the weights of a few thousand draws are degenerate.
 
 Hyperprior: half-normal on each spread, of scale ``factor`` x the specimen model's
 stated physical guess (motor speed ~5% with load and battery, build tolerances
