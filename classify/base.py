@@ -14,6 +14,7 @@ from .preprocess import as_profiles, preprocess
 
 
 DEVICES = ("auto", "cpu", "cuda")
+PRECISIONS = ("auto", "float32", "bfloat16")  # the CNN's forward passes: classify.cnn.resolve_precision
 """Where the torch models run: "auto" (a CUDA GPU when torch sees one, else the CPU)."""
 
 

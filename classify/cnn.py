@@ -64,7 +64,7 @@ from torch import nn
 from ..radar.progress import progress_bar
 from ..radar.seeds import child_seed, torch_generator
 from ..radar.seeds import rng as seeded_rng
-from .base import DEVICES, ProfileClassifier
+from .base import DEVICES, PRECISIONS, ProfileClassifier
 
 SIDE = 20
 
@@ -129,9 +129,6 @@ def split_indices(yi: np.ndarray, fractions=(0.8, 0.1, 0.1), groups=None, rng=No
         for part, sel in zip(parts, np.split(g, [n - n_val - n_test, n - n_test])):
             part.append(np.flatnonzero(in_class & np.isin(groups, sel)))
     return tuple(np.sort(np.concatenate(p)) for p in parts)
-
-
-PRECISIONS = ("auto", "float32", "bfloat16")
 
 
 def resolve_precision(precision: str, device: str) -> str:

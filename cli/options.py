@@ -133,7 +133,9 @@ def add_classifier_options(p, *, epochs_default: int = 50, normalisation: bool =
     g.add_argument("--patience", type=positive_int, default=None, metavar="EPOCHS",
                    help="CNN early stopping after this many epochs without a better validation loss "
                         "(default: none, train every epoch)")
-    g.add_argument("--precision", choices=("auto", "float32", "bfloat16"), default="auto",
+    from ..classify.base import PRECISIONS
+
+    g.add_argument("--precision", choices=PRECISIONS, default="auto",
                    help="CNN forward passes: bfloat16 autocast (1.5x on CPUs with native bfloat16, the same "
                         "accuracy), float32, or auto = bfloat16 where the CPU has it natively, else float32 "
                         "(default: %(default)s)")

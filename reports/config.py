@@ -198,7 +198,7 @@ class StudyConfig:
         _check_names(src, "protocol.calibration_method", (p.calibration_method,), ("auto", "amortized", "likelihood"))
         _check_names(src, "protocol.models", p.models, ("svm", "nb", "xgb", "cnn"))
         _check_names(src, "protocol.normalisation", (p.normalisation,), NORMALISATIONS)
-        from ..classify.cnn import PRECISIONS
+        from ..classify.base import PRECISIONS
 
         _check_names(src, "protocol.cnn_precision", (p.cnn_precision,), PRECISIONS)
         _check_names(src, "protocol.strategies", p.strategies, STRATEGIES)
