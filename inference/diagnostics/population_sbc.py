@@ -35,9 +35,12 @@ import numpy as np
 from ...generator import N_PARAMS, ClassParams, load_reference
 from ...radar.seeds import seed_sequence
 from ..population.model import SPREADS, Hyperprior
+from ..settings import CalibrationSettings
 from ..space.priors import engine_lines
 from .sbc import run_replicates, sbc_quantities, summarise
-from ..settings import CalibrationSettings
+
+METHODS = ("amortized", "likelihood")
+"""How each drone is calibrated: the shipped estimator, or the closed-form route."""
 
 
 def engines_in_order(x: np.ndarray) -> np.ndarray:
@@ -114,6 +117,8 @@ def run_population_sbc(reference: ClassParams | str = "HELI", n_replicates: int 
     """Population SBC (module doc): :func:`.sbc.summarise` of the ranks, separately for
     the spreads (``spreads``) and the unseen drone's lines (``new_drone``), plus all
     (``all``). Resumable (``checkpoint``, JSON lines) and spread over ``workers``."""
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     ref = load_reference(reference) if isinstance(reference, str) else reference
     settings = settings or CalibrationSettings(sampler="laplace")
     hyperprior = hyperprior or Hyperprior.stated()
