@@ -55,6 +55,7 @@ last bits).
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import time
 
@@ -140,8 +141,14 @@ def resolve_precision(precision: str, device: str) -> str:
         raise ValueError(f"precision must be one of {PRECISIONS}, got {precision!r}")
     if precision != "auto":
         return precision
-    native = device == "cpu" and bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
-    return "bfloat16" if native else "float32"
+    return "bfloat16" if device == "cpu" and _native_bf16() else "float32"
+
+
+@functools.cache
+def _native_bf16() -> bool:
+    """Whether this CPU has native bfloat16 instructions (asked once per process: the
+    answer is read on every training batch)."""
+    return bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
 
 
 def resolve_device(device: str = "auto") -> str:

@@ -69,8 +69,8 @@ def run_population(args, profiles, drones, settings, acquisition, method: str = 
                         else ["options (none recorded)"])
             if not changed:
                 res = old
-                result(f"drone {drone}: reused {path} (same measurements, engines, seed, sampler, calibration "
-                       "settings and acquisition)")
+                same = ["measurements", *key]  # what the reuse rests on, for either method
+                result(f"drone {drone}: reused {path} (same {', '.join(same[:-1])} and {same[-1]})")
             else:
                 info(f"drone {drone}: {path} was calibrated with other {', '.join(changed)}; calibrating again")
         if res is None:

@@ -56,12 +56,32 @@ def engines_in_order(x: np.ndarray) -> np.ndarray:
     return np.take_along_axis(xe, order[:, :, None], axis=1).reshape(n, -1)
 
 
+def _mean_inside_prior(ref: ClassParams, n: int, scene, truth_ss, data_ss, attempts: int = 1000):
+    """A class mean drawn from the calibration prior (:class:`..amortized.target.DroneSpace`)
+    and the campaign seed whose ``n`` drones all lie inside the prior's support (the
+    truths the estimator was trained on): redrawn until they do, checked on the drones
+    :func:`~mdaug.generator.chain.simulate_campaign` will draw from that seed (its first
+    spawned stream), before any chain runs."""
+    from ...generator.chain.scene import draw_specimens
+    from ..amortized.target import DroneSpace
+    from ..space.priors import Priors
+
+    space = DroneSpace(ref.n_engines, Priors.from_reference(ref))
+    mean_rng = np.random.default_rng(truth_ss.spawn(1)[0])
+    for attempt in range(attempts):
+        mean = ClassParams.from_array(space.vectors(space.sample_prior(1, mean_rng))[0], name=ref.name)
+        data_seed = int(data_ss.generate_state(attempt + 1)[attempt])
+        drones = draw_specimens(mean.to_array(), n, scene, np.random.default_rng(seed_sequence(data_seed).spawn(3)[0]))
+        if np.all(np.isfinite(space.log_prior(space.from_vectors(drones)))):
+            break
+    return mean, data_seed
+
+
 def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n_drones: int,
                          n_acquisitions: int, ramps: int, settings: CalibrationSettings, hyperprior: Hyperprior,
                          n_rank: int, method: str = "amortized") -> dict:
     """One population SBC replicate (module doc): ranks of the spreads and of the unseen drone's lines."""
     from ...generator.chain import SceneConfig, simulate_campaign
-    from ...generator.chain.scene import draw_specimens
     from ...generator.specimens import SpecimenSpread
     from ..calibrate import calibrate
     from ..population.result import calibrate_population
@@ -70,24 +90,10 @@ def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n
     spreads = hyperprior.sample(1, np.random.default_rng(truth_ss))[0]
     scene = SceneConfig(n_ramps=ramps, specimens=SpecimenSpread(**dict(zip(SPREADS, spreads.tolist()))))
     t0 = time.perf_counter()
-    mean = ref
     if method == "amortized":  # the class mean from the calibration prior the drones' posteriors were trained on
-        from ..amortized.target import DroneSpace
-        from ..space.priors import Priors
-
-        space = DroneSpace(ref.n_engines, Priors.from_reference(ref))
-        mean_rng = np.random.default_rng(truth_ss.spawn(1)[0])
-    data_seed = int(data_ss.generate_state(1)[0])
-    for attempt in range(1000):  # amortized: every drone inside the prior's support (the truths it was trained on)
-        if method != "amortized":
-            break
-        mean = ClassParams.from_array(space.vectors(space.sample_prior(1, mean_rng))[0], name=ref.name)
-        data_seed = int(data_ss.generate_state(attempt + 1)[attempt])
-        # the drones simulate_campaign will draw from this seed (its first spawned stream), checked before the chain
-        drones = draw_specimens(mean.to_array(), n_drones + 1, scene,
-                                np.random.default_rng(seed_sequence(data_seed).spawn(3)[0]))
-        if np.all(np.isfinite(space.log_prior(space.from_vectors(drones)))):
-            break
+        mean, data_seed = _mean_inside_prior(ref, n_drones + 1, scene, truth_ss, data_ss)
+    else:
+        mean, data_seed = ref, int(data_ss.generate_state(1)[0])
     camp = simulate_campaign(mean, n_drones + 1, (n_drones + 1) * n_acquisitions, data_seed, scene=scene)
     if method == "amortized":  # the shipped estimator's posterior per drone (milliseconds; no emcee route)
         from ..amortized.calibrate import calibrate_amortized

@@ -235,6 +235,5 @@ def sample_spreads(drones: list[DroneSummary], model: PopulationModel, hyperprio
         chol = np.linalg.cholesky(P)  # P = L L^T: mu = mu_hat + L^-T z
         z = rng.standard_normal(mu_hat.shape)
         mu[s:s + 512] = mu_hat + np.linalg.solve(np.swapaxes(chol, 1, 2), z[..., None])[..., 0]
-    tau, steps, converged = run.tau, run.n_steps, run.converged
-    return {"spreads": spreads, "mu": mu, "measured": measured, "tau": tau, "steps": int(steps),
-            "converged": bool(converged), "acceptance": float(np.mean(run.acceptance)), "reason": run.reason}
+    return {"spreads": spreads, "mu": mu, "measured": measured, "tau": run.tau, "steps": int(run.n_steps),
+            "converged": bool(run.converged), "acceptance": float(np.mean(run.acceptance)), "reason": run.reason}
