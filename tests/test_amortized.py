@@ -1,6 +1,7 @@
 """The amortized calibration: label-free target, networks, training, estimator files,
 SBC machinery (on a toy simulator whose posterior is known), the emcee route and
 the calibrate verb. Tiny networks and budgets: seconds."""
+import json
 import zipfile
 
 import numpy as np
@@ -70,6 +71,42 @@ def test_label_free_prior_density_is_normalised():
     assert np.all(np.isfinite(lf.log_prior_u(u)))
     mu, cov = u.mean(0), 1.5 * np.cov(u.T)
     z = rng.multivariate_normal(mu, cov, 200000)
+    w = np.exp(lf.log_prior_u(z) - multivariate_normal(mu, cov).logpdf(z))
+    assert abs(w.mean() - 1.0) < 4 * w.std() / np.sqrt(len(w)) + 0.02
+
+
+def test_engines_are_ordered_by_brightness():
+    """QUAD: q does not depend on the order of the engines in the vector; engine 0 of q
+    is the brightest (Gamma ratios <= 0, decreasing), and its lines are its own."""
+    from mdaug.generator import IDX
+
+    ref = load_reference("QUAD")
+    pr = Priors.from_reference(ref)
+    space, lf = DroneSpace(4, pr), LabelFree(4, pr, ref.to_array())
+    x = space.vectors(space.sample_prior(200, np.random.default_rng(1))).reshape(200, 4, 13)
+    q = lf.quantities(x.reshape(200, -1))
+    np.testing.assert_allclose(lf.quantities(x[:, [2, 0, 3, 1]].reshape(200, -1)), q, rtol=1e-12)
+    lng = q[:, [9 * e + 7 for e in range(1, 4)]]
+    assert [lf.names[9 * e + 7] for e in range(1, 4)] == ["lnG[1]", "lnG[2]", "lnG[3]"]
+    assert np.all(lng <= 0) and np.all(np.diff(lng, axis=1) <= 0)
+    brightest = np.argmax(x[..., IDX["Gamma"]], axis=1)
+    w_bright, _, _ = engine_lines(x[np.arange(200), brightest][:, None])
+    np.testing.assert_allclose(q[:, :4], np.sort(w_bright[:, 0], axis=1), rtol=1e-12)
+
+
+def test_two_engine_prior_density_is_normalised():
+    """Two engines (the QUAD prior's): the closed-form density in u, with its Gamma-ratio
+    part for the brightness order, integrates to one (importance sampling)."""
+    from scipy.stats import multivariate_normal
+
+    ref = load_reference("QUAD")
+    pr = Priors.from_reference(ref)
+    space, lf = DroneSpace(2, pr), LabelFree(2, pr, ref.to_array())
+    rng = np.random.default_rng(0)
+    u = lf.to_unbounded(lf.quantities(space.vectors(space.sample_prior(20000, rng))))
+    assert np.all(np.isfinite(lf.log_prior_u(u)))
+    mu, cov = u.mean(0), 1.5 * np.cov(u.T)
+    z = rng.multivariate_normal(mu, cov, 300000)
     w = np.exp(lf.log_prior_u(z) - multivariate_normal(mu, cov).logpdf(z))
     assert abs(w.mean() - 1.0) < 4 * w.std() / np.sqrt(len(w)) + 0.02
 
@@ -152,6 +189,25 @@ def test_tampered_or_truncated_estimator_is_refused(tiny, tmp_path):
                 z.writestr(k, v)
         with pytest.raises(EstimatorError, match=text):
             AmortizedEstimator.load(p)
+
+
+def test_an_estimator_of_another_target_version_is_refused(tmp_path):
+    """A QUAD estimator whose quantities order the engines by their lowest line (target
+    version 1) is refused by field, with the command that retrains it."""
+    from mdaug.inference.amortized.shipped import shipped_path
+
+    with zipfile.ZipFile(shipped_path("QUAD", 4)) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    meta = json.loads(members["meta.json"])
+    meta["target"] = 1
+    members["meta.json"] = json.dumps(meta).encode()
+    old = tmp_path / "old.zip"
+    with zipfile.ZipFile(old, "w") as z:
+        for k, v in members.items():
+            z.writestr(k, v)
+    with pytest.raises(EstimatorError, match=r"old.zip: meta.json field 'target' is 1: .* retrain with: "
+                                             r"mdaug train-estimator --class QUAD --ramps 4"):
+        AmortizedEstimator.load(old)
 
 
 def test_data_of_another_acquisition_or_class_is_refused(tiny):

@@ -24,7 +24,7 @@ from ...radar.io import atomic_write
 from ..space.priors import Priors
 from .nets import NetConfig, RatioNet, posterior_net
 from .simulate import SIMULATOR, SimulationSpec, spec_from_dict
-from .target import LabelFree
+from .target import TARGET, LabelFree
 
 FORMAT = "mdaug-estimator-1"
 MEMBERS = ("meta.json", "posterior.pt", "ratio.pt")
@@ -52,7 +52,7 @@ class AmortizedEstimator:
         self.label_free = LabelFree(ref.n_engines, self.priors, ref.to_array())
         self.meta = dict(meta or {})
         self.meta.update(format=FORMAT, spec=spec.to_dict(), prior=self.priors.to_dict(), net=net_cfg.to_dict(),
-                         label_free=self.label_free.names)
+                         label_free=self.label_free.names, target=TARGET)
 
     @property
     def class_name(self) -> str:
@@ -202,6 +202,10 @@ class AmortizedEstimator:
             raise EstimatorError(f"{src}: meta.json field 'prior' differs from the class reference's prior; "
                                  f"retrain with: {train_command(spec)}")
         ref = spec.reference
+        if ref.n_engines > 1 and meta.get("target", 1) != TARGET:  # one engine: every version is the same
+            raise EstimatorError(f"{src}: meta.json field 'target' is {meta.get('target', 1)!r}: its quantities "
+                                 f"order the engines differently from this mdaug's (version {TARGET}); "
+                                 f"retrain with: {train_command(spec)}")
         lf = LabelFree(ref.n_engines, spec.priors(), ref.to_array())
         length = spec.radar.slice_length
         u0 = torch.randn(64, lf.dim)

@@ -29,7 +29,7 @@ def default_nets(class_name: str) -> NetConfig:
 
 
 def default_training() -> TrainConfig:
-    return TrainConfig(batch=512, lr=1e-3, patience=10, max_epochs=300)
+    return TrainConfig(batch=128, lr=5e-4, patience=10, max_epochs=300)
 
 
 def shipped_path(class_name: str, ramps: int) -> Path:
