@@ -112,7 +112,7 @@ def de_sweep(theta, ll, lprior, beta, target, rng, phase_cols=(), bounds=None, p
     (lo, hi) arrays (dim,)) instead one random coordinate redrawn uniformly on
     [lo, hi] (symmetric: the uniform density does not depend on the current value),
     which lets a particle jump straight to a distant narrow mode of that coordinate.
-    With probability ``p_jump`` (needs ``mixture``, a :class:`.modes.ModeMixture`)
+    With probability ``p_jump`` (needs ``mixture``, a :class:`.toolbox.StudentMixture`)
     instead an independence proposal from the mixture over known modes, accepted
     with the ratio that includes q(old) / q(new). With probability ``p_relabel``
     (needs ``relabel``: (theta (k, dim), rng) -> (theta', log |Jacobian|), a random
