@@ -4,7 +4,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from mdaug.inference.samplers.laplace import LaplaceSampler
+from mdaug.inference.samplers.laplace import LaplaceSampler, LaplaceSettings
+from mdaug.inference.settings import CalibrationSettings
 from mdaug.inference.samplers.toolbox import hessian, systematic_resample
 from mdaug.inference.samplers import get_sampler
 
@@ -36,7 +37,7 @@ class Target:
 
 
 def _settings(n=4000):
-    return SimpleNamespace(n_particles=n)
+    return CalibrationSettings(sampler="laplace", plugins={"laplace": LaplaceSettings(n_particles=n)})
 
 
 def _fit(post, *modes):

@@ -26,7 +26,10 @@ Cost: 2 d^2 + 2 d + 3 per mode + N evaluations, one batch each, no chain: second
 """
 from __future__ import annotations
 
+import dataclasses
 import time
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -35,6 +38,28 @@ from .toolbox import INFLATE, StudentMixture, fit_modes, laplace_at, systematic_
 
 KHAT_MAX, ESS_MIN = 0.7, 400
 MASS_FLOOR = 0.1  # a mode's least share of the proposal, x 1 / (number of modes)
+
+
+@dataclass(frozen=True)
+class LaplaceSettings:
+    """The laplace plugin's knob: ``n_particles`` importance draws (0 = auto:
+    max(2000, 40 x dim); the command line's ``--particles`` sets it with the SMC's)."""
+
+    n_particles: int = 0
+
+    LEGACY: ClassVar[dict] = {}  # old flat names of CalibrationSettings: the field names themselves
+    BUDGETS: ClassVar[tuple] = ()
+
+    def __post_init__(self) -> None:
+        if self.n_particles < 0 or self.n_particles == 1:
+            raise ValueError(f"CalibrationSettings: n_particles must be 0 (auto) or >= 2, got {self.n_particles}")
+
+    @classmethod
+    def quick(cls) -> "LaplaceSettings":
+        return cls()
+
+    def replace(self, **kw) -> "LaplaceSettings":
+        return dataclasses.replace(self, **kw)
 
 
 def proposal(post, centres: list, rng: np.random.Generator) -> tuple[StudentMixture, int]:
@@ -56,7 +81,9 @@ def proposal(post, centres: list, rng: np.random.Generator) -> tuple[StudentMixt
 
 
 class LaplaceSampler:
-    """Importance sampling from the Laplace approximation at the fit (module doc)."""
+    """Importance sampling from the Laplace approximation at the fit (module doc);
+    ``settings``: the shared :class:`~mdaug.inference.settings.CalibrationSettings`
+    (its own knobs, :class:`LaplaceSettings`, at ``settings.of("laplace")``)."""
 
     name = "laplace"
 
@@ -68,7 +95,7 @@ class LaplaceSampler:
         rng = np.random.default_rng(seed_seq)
         centres = [post.theta_from_fit(np.asarray(z)[None])[0] for z in fit_modes(post, fit)]
         mix, evals = proposal(post, centres, rng)
-        n = settings.n_particles or max(2000, 40 * layout.dim)
+        n = settings.of("laplace").n_particles or max(2000, 40 * layout.dim)
         pts = np.empty((0, layout.dim))
         while len(pts) < n:  # draws inside the prior (the proposal is unbounded)
             x = mix.sample(n, rng)
