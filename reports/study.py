@@ -135,7 +135,7 @@ class Study(TrainingStages):
         from ..generator.specimens import SpecimenSpread
 
         sim = self.cfg.simulation
-        scene = SceneConfig(n_ramps=sim.ramps)
+        scene = SceneConfig().with_acquisition(ramps=sim.ramps)
         reference = scene.replace(specimens=SpecimenSpread.exact())
         sets, select, new, large = {}, {}, {}, {}
         for cls in self.cfg.classes:
