@@ -9,7 +9,7 @@ import pytest
 from mdaug.inference.samplers import SAMPLERS, settings_class
 from mdaug.inference.samplers.ensemble import EmceeSettings
 from mdaug.inference.samplers.laplace import LaplaceSettings
-from mdaug.inference.samplers.tempering import SMCSettings
+from mdaug.inference.samplers.smc import SMCSettings
 from mdaug.inference.settings import CalibrationSettings
 
 OLD_QUICK = json.loads(

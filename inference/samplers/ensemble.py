@@ -10,21 +10,19 @@ resume, memory), with its knobs in :class:`EmceeSettings`.
 """
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 
 from ...radar.seeds import rng as seeded_rng
 from ...generator.model import wrap_phase
-from .base import SamplerRun
+from .base import PluginSettings, SamplerRun
 from .emcee_run import run_ensemble
 from .toolbox import curvature_scales, fit_modes
 
 
 @dataclass(frozen=True)
-class EmceeSettings:
+class EmceeSettings(PluginSettings):
     """The emcee plugin's knobs (and the driver's, :func:`.emcee_run.run_ensemble`).
 
     ``n_walkers`` walkers (0 = 2 x dimensions + 2, the least differential evolution
@@ -52,8 +50,7 @@ class EmceeSettings:
     init_ball: float = 0.5
     init_modes: bool = True
 
-    LEGACY: ClassVar[dict] = {}  # old flat names of CalibrationSettings: the field names themselves
-    BUDGETS: ClassVar[tuple] = ("max_steps",)  # a resumed run may be given another
+    BUDGETS = ("max_steps",)  # a resumed run may be given another
 
     def __post_init__(self) -> None:
         positive = {"check_every": self.check_every, "min_tau_multiple": self.min_tau_multiple,
@@ -70,9 +67,6 @@ class EmceeSettings:
     def quick(cls) -> "EmceeSettings":
         """A short chain for tests and ``--quick`` (usually ends before 50 tau, flagged)."""
         return cls(n_walkers=32, max_steps=1000, check_every=250)
-
-    def replace(self, **kw) -> "EmceeSettings":
-        return dataclasses.replace(self, **kw)
 
 
 def initial_ball(layout, theta_best: np.ndarray, log_post, n_walkers: int, scale,

@@ -26,14 +26,12 @@ Cost: 2 d^2 + 2 d + 3 per mode + N evaluations, one batch each, no chain: second
 """
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 
-from .base import SamplerRun
+from .base import PluginSettings, SamplerRun
 from .toolbox import INFLATE, StudentMixture, fit_modes, laplace_at, systematic_resample
 
 KHAT_MAX, ESS_MIN = 0.7, 400
@@ -41,25 +39,15 @@ MASS_FLOOR = 0.1  # a mode's least share of the proposal, x 1 / (number of modes
 
 
 @dataclass(frozen=True)
-class LaplaceSettings:
+class LaplaceSettings(PluginSettings):
     """The laplace plugin's knob: ``n_particles`` importance draws (0 = auto:
     max(2000, 40 x dim); the command line's ``--particles`` sets it with the SMC's)."""
 
     n_particles: int = 0
 
-    LEGACY: ClassVar[dict] = {}  # old flat names of CalibrationSettings: the field names themselves
-    BUDGETS: ClassVar[tuple] = ()
-
     def __post_init__(self) -> None:
         if self.n_particles < 0 or self.n_particles == 1:
             raise ValueError(f"CalibrationSettings: n_particles must be 0 (auto) or >= 2, got {self.n_particles}")
-
-    @classmethod
-    def quick(cls) -> "LaplaceSettings":
-        return cls()
-
-    def replace(self, **kw) -> "LaplaceSettings":
-        return dataclasses.replace(self, **kw)
 
 
 def proposal(post, centres: list, rng: np.random.Generator) -> tuple[StudentMixture, int]:
