@@ -78,16 +78,40 @@ def check_calibrate_sizes(args, settings, n_measurements: int) -> None:
     evaluation = n_measurements * engines * SECONDS_LIKELIHOOD_RAMP * settings.n_acquisitions * settings.ramps_drawn
     check_size(("--starts", settings.n_starts, 4), ("--fit-budget", settings.fit_budget, 1500),
                seconds_each=evaluation, what="likelihood evaluations of the fit")
-    walkers = ("--walkers", settings.n_walkers or max(32, 2 * dim + 2), 2 * dim + 2)
+    emcee, smc = settings.of("emcee"), settings.of("smc")
+    walkers = ("--walkers", emcee.n_walkers or max(32, 2 * dim + 2), 2 * dim + 2)
     check_size(walkers, seconds_each=evaluation, what="likelihood evaluations of one sampler step")
-    if settings.max_steps is not None:  # the step cap also sets how sparsely the chain is stored
-        check_size(("--max-steps", settings.max_steps, 10000), walkers, seconds_each=evaluation,
+    if emcee.max_steps is not None:  # the step cap also sets how sparsely the chain is stored
+        check_size(("--max-steps", emcee.max_steps, 10000), walkers, seconds_each=evaluation,
                    what="likelihood evaluations of the sampler")
-    if settings.n_particles:
-        check_size(("--particles", settings.n_particles, 40 * dim), seconds_each=evaluation * 10,
+    if smc.n_particles:
+        check_size(("--particles", smc.n_particles, 40 * dim), seconds_each=evaluation * 10,
                    bytes_each=dim * 8 * 8, what="particles over the first tempering stage")
     if settings.time_budget is not None:
         check_size(("--time-budget", settings.time_budget, 1200), seconds_each=1.0, what="seconds")
+
+
+SHARED_OPTIONS = {"fit_budget": "fit_budget", "starts": "n_starts", "fit_algorithm": "fit_algorithm",
+                  "normalisation": "normalisation", "sampler": "sampler", "time_budget": "time_budget",
+                  "likelihood": "likelihood", "draws": "n_acquisitions", "ramps_drawn": "ramps_drawn"}
+"""Options (their argparse dest) -> the shared calibration setting each sets."""
+
+PLUGIN_OPTIONS = {"max_steps": (("emcee", "max_steps"),), "walkers": (("emcee", "n_walkers"),),
+                  "particles": (("smc", "n_particles"), ("laplace", "n_particles"))}
+"""Options -> the sampler plugins' knobs each sets (--particles sizes both SMC and Laplace)."""
+
+
+def settings_from_args(args, base):
+    """``base`` (a :class:`~mdaug.inference.settings.CalibrationSettings`) with the options
+    the command line gave (None: not given) mapped onto the shared settings and the
+    plugins' own."""
+    settings = base.replace(**{key: getattr(args, dest) for dest, key in SHARED_OPTIONS.items()
+                               if getattr(args, dest) is not None})
+    for dest, targets in PLUGIN_OPTIONS.items():
+        if getattr(args, dest) is not None:
+            for plugin, knob in targets:
+                settings = settings.with_plugin(plugin, **{knob: getattr(args, dest)})
+    return settings
 
 
 def run_calibrate(args) -> int:
@@ -127,13 +151,6 @@ def run_calibrate(args) -> int:
         raise DataFileError(f"{args.measured}: field 'profiles' holds negative values; calibration takes linear "
                             "magnitudes (>= 0), not dB")
     base = CalibrationSettings.quick() if args.quick else CalibrationSettings()
-    overrides = {k: v for k, v in {"max_steps": args.max_steps, "fit_budget": args.fit_budget,
-                                   "n_starts": args.starts, "n_walkers": args.walkers,
-                                   "fit_algorithm": args.fit_algorithm, "normalisation": args.normalisation,
-                                   "sampler": args.sampler, "n_particles": args.particles,
-                                   "time_budget": args.time_budget, "likelihood": args.likelihood,
-                                   "n_acquisitions": args.draws, "ramps_drawn": args.ramps_drawn}.items()
-                 if v is not None}
     from ..generator.acquisition import Acquisition, acquisition_from_file, resolve_acquisition
 
     from_file = acquisition_from_file(data.extra, str(args.measured))
@@ -142,8 +159,8 @@ def run_calibrate(args) -> int:
     acquisition, _ = acquisition_from_args(args, from_file)
     source = ("from the options" if acquisition_given(args) else
               f"as {args.measured} states it" if from_file is not None else "the published single chirp (default)")
-    settings = base.replace(threads=args.threads, progress=progress_enabled(),
-                            range_offset=not args.no_range_offset, **overrides)
+    settings = settings_from_args(args, base.replace(threads=args.threads, progress=progress_enabled(),
+                                                     range_offset=not args.no_range_offset))
     if len(profiles) > MAX_MEASUREMENTS and not args.population:
         raise DataFileError(f"{args.measured}: field 'profiles' holds {len(profiles)} measurements of class {cls}; "
                             f"one calibration takes at most {MAX_MEASUREMENTS} of one drone (the supported case is "
@@ -221,6 +238,7 @@ def add_calibrate(sub, parents, help):
     from ..radar.profiles import NORMALISATIONS
 
     d, q = CalibrationSettings(), CalibrationSettings.quick()
+    d_emcee, q_emcee = d.of("emcee"), q.of("emcee")
     p = add_verb(sub, "calibrate", parents, help=help, interrupted=_interrupted,
                  description="Fit the class's parameter vector to measured profiles (nlopt, several starts) and "
                              "sample its posterior (emcee until 50 autocorrelation times, or tempered SMC with "
@@ -271,11 +289,11 @@ def add_calibrate(sub, parents, help):
                         f"flagged not converged; rerun to continue) (default: {d.time_budget:g}; the emcee route "
                         "beside the amortized posterior: 120)")
     g.add_argument("--max-steps", type=positive_int, default=None, metavar="N",
-                   help=f"emcee step budget, steps per walker (default: {_cap(d.max_steps)}; --quick: "
-                        f"{_cap(q.max_steps)})")
+                   help=f"emcee step budget, steps per walker (default: {_cap(d_emcee.max_steps)}; --quick: "
+                        f"{_cap(q_emcee.max_steps)})")
     g.add_argument("--walkers", type=walkers_arg, default=None, metavar="N",
                    help="emcee walkers (default: 2 x the number of sampled coordinates + 2, at least 32; "
-                        f"--quick: {q.n_walkers})")
+                        f"--quick: {q_emcee.n_walkers})")
     g.add_argument("--particles", type=particles_arg, default=None, metavar="N",
                    help="SMC particles (default: max(500, 40 x the number of sampled coordinates))")
     g.add_argument("--starts", type=positive_int, default=None, metavar="N",

@@ -30,6 +30,22 @@ def reuse_key(engines, seed: int, settings, acquisition, method: str = "likeliho
                                   "settings": options, "acquisition": acquisition.to_dict()}))
 
 
+def current_form(stored: dict) -> dict:
+    """A drone's recorded :func:`reuse_key` with settings written before the sampler
+    plugins had their own (every knob at the top level) read into today's form, so
+    that such a posterior is still reused when nothing changed."""
+    from ..inference.settings import CalibrationSettings
+
+    flat = stored.get("settings")
+    if not isinstance(flat, dict) or "plugins" in flat or "sampler" not in stored:
+        return stored
+    try:
+        now = CalibrationSettings.from_dict({**flat, "sampler": stored["sampler"]}).to_dict()
+    except ValueError:
+        return stored  # settings no release wrote: compared as they are (and so not reused)
+    return {**stored, "settings": {k: v for k, v in now.items() if k not in ("threads", "progress", "sampler")}}
+
+
 def run_population(args, profiles, drones, settings, acquisition, method: str = "likelihood") -> int:
     """Each drone calibrated on its own (kept beside OUT, reused by a rerun on the same
     data with the same options: :func:`reuse_key`), then the class's population
@@ -64,7 +80,7 @@ def run_population(args, profiles, drones, settings, acquisition, method: str = 
             old = CalibrationResult.load(path, class_name=cls)
             data, _ = prepare_measured(rows, RadarConfig(), settings.normalisation)
             changed = [] if np.array_equal(np.asarray(old.idata.observed_data["y"]), data) else ["measurements"]
-            stored = old.meta.get(REUSE_FIELD) or {}
+            stored = current_form(old.meta.get(REUSE_FIELD) or {})
             changed += ([name for name in key if stored.get(name) != key[name]] if stored
                         else ["options (none recorded)"])
             if not changed:

@@ -22,11 +22,12 @@ def scene_from_args(args):
 
     d = SceneConfig()
     return SceneConfig(
-        n_frames=args.frames, n_ramps=args.ramps, snr_db=None if args.no_noise else args.snr_db,
-        phases=args.phases, range_m=args.range_m, azimuth_deg=args.azimuth_deg, yaw_deg=args.yaw_deg,
+        acquisition=d.acquisition.replace(ramps=args.ramps, phases=args.phases, yaw_deg=args.yaw_deg),
+        specimens=d.specimens.replace(width=0.0 if args.reference_specimens else args.specimen_spread),
+        n_frames=args.frames, snr_db=None if args.no_noise else args.snr_db,
+        range_m=args.range_m, azimuth_deg=args.azimuth_deg,
         drift_step_m=args.drift_mm * 1e-3, n_clutter=args.clutter, clutter_db=args.clutter_db,
-        quantise=not args.no_adc, specimen_spread=0.0 if args.reference_specimens else args.specimen_spread,
-        dtype=args.dtype, body_ratio=d.body_ratio,
+        quantise=not args.no_adc, dtype=args.dtype,
     )
 
 
@@ -114,19 +115,19 @@ def add_simulate(sub, parents, help):
     g.add_argument("--snr-db", type=finite_float, default=d.snr_db, metavar="DB",
                    help="target to receiver-noise power per IF sample, dB (default: %(default)s dB)")
     g.add_argument("--no-noise", action="store_true", help="no receiver noise (overrides --snr-db)")
-    g.add_argument("--ramps", type=positive_int, default=d.n_ramps, metavar="K",
+    g.add_argument("--ramps", type=positive_int, default=d.acquisition.ramps, metavar="K",
                    help="ramps per frame, averaged incoherently by the chain (default: %(default)s)")
     g.add_argument("--frames", type=positive_int, default=None, metavar="N",
                    help="frames per acquisition, at least mti_depth + 1 (default: mti_depth + 1 = 11, one "
                         "MTI frame)")
-    g.add_argument("--phases", choices=SCENE_PHASES, default=d.phases,
+    g.add_argument("--phases", choices=SCENE_PHASES, default=d.acquisition.phases,
                    help="vibration phases per frame: uniform (random) or fixed (default: %(default)s)")
     g.add_argument("--range-m", type=float_pair, default=d.range_m, metavar="LO,HI",
                    help=f"target range, uniform in LO..HI, m (default: {_pair(d.range_m)} m)")
     g.add_argument("--azimuth-deg", type=float_pair, default=d.azimuth_deg, metavar="LO,HI",
                    help="target azimuth, uniform in LO..HI, degrees; write --azimuth-deg=-30,30 (a leading "
                         f"minus needs the =) (default: {_pair(d.azimuth_deg)} deg)")
-    g.add_argument("--yaw-deg", type=nonneg_float, default=d.yaw_deg, metavar="DEG",
+    g.add_argument("--yaw-deg", type=nonneg_float, default=d.acquisition.yaw_deg, metavar="DEG",
                    help="drone yaw, uniform in +- this, degrees (default: %(default)s deg)")
     g.add_argument("--drift-mm", type=nonneg_float, default=d.drift_step_m * 1e3, metavar="MM",
                    help="hover drift step per frame, mm (default: %(default)s mm)")
@@ -136,7 +137,7 @@ def add_simulate(sub, parents, help):
                    help="clutter amplitude relative to the target, uniform in LO..HI, dB; write "
                         f"--clutter-db=-10,10 (default: {_pair(d.clutter_db)} dB)")
     g.add_argument("--no-adc", action="store_true", help="keep float samples (no gain control, no 12-bit codes)")
-    g.add_argument("--specimen-spread", type=nonneg_float, default=d.specimen_spread, metavar="X",
+    g.add_argument("--specimen-spread", type=nonneg_float, default=d.specimens.width, metavar="X",
                    help="multiplier of every specimen-to-specimen spread (default: %(default)s)")
     g.add_argument("--reference-specimens", action="store_true",
                    help="every specimen is the class reference itself (spread 0)")

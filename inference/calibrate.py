@@ -150,9 +150,8 @@ def run_calibration(post, ref: ClassParams, settings: CalibrationSettings, ss: n
     fit_ss, mc_ss = ss.spawn(2)
     acquisition = acquisition if acquisition is not None else Acquisition()
     with threadpool_limits(settings.threads):
-        resume_key = {k: v for k, v in settings.to_dict().items()
-                      if k not in ("max_steps", "time_budget", "progress", "threads")}
-        fp = fingerprint(post.data, text=json.dumps([ref.name, layout.E, layout.priors.to_dict(), resume_key,
+        key = settings.resume_key()  # a resumed run may have other budgets
+        fp = fingerprint(post.data, text=json.dumps([ref.name, layout.E, layout.priors.to_dict(), key,
                                                      str(ss.entropy), list(ss.spawn_key), radar.to_dict(),
                                                      acquisition.to_dict()], default=str))
         fit = saved_fit(backend_path, fp)
@@ -189,7 +188,7 @@ def _diagnostics(layout: Layout, run: SamplerRun, fit, settings, fit_reused: boo
             "seconds": float(run.seconds), "fit_seconds": float(fit.seconds), "resumed_at": int(run.resumed_at),
             "fit_reused": bool(fit_reused), "store_every": int(run.store_every),
             "n_fit_starts": int(settings.n_starts), "n_fit_starts_agreeing": int(fit.n_agree),
-            "multimodal": bool(fit.multimodal), "min_tau_multiple": float(settings.min_tau_multiple)}
+            "multimodal": bool(fit.multimodal), "min_tau_multiple": float(settings.of("emcee").min_tau_multiple)}
 
 
 def _posterior_variables(layout: Layout, theta: np.ndarray):

@@ -1,17 +1,27 @@
-"""Settings of a calibration run (one frozen dataclass, presets as classmethods)."""
+"""Settings of a calibration run: what every run needs in :class:`CalibrationSettings`,
+each sampler plugin's own knobs in its own frozen dataclass beside the plugin
+(:func:`.samplers.settings_class`), carried here one per registered plugin."""
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
 
-from .samplers import SAMPLERS  # the registry holds the names
+from .samplers import SAMPLERS, settings_class  # the registry holds the names and the plugins' settings
 
 FIT_ALGORITHMS = ("GN_CRS2_LM", "GN_MLSL_LDS", "GN_DIRECT_L", "GN_ISRES", "GN_ESCH")
 LOCAL_ALGORITHMS = ("LN_BOBYQA", "LN_NELDERMEAD", "LN_SBPLX")
 LIKELIHOODS = ("auto", "marginal", "synthetic", "fitted")
 
 
-@dataclass(frozen=True)
+def _flat_names(name: str) -> dict:
+    """Plugin ``name``'s knobs by their flat name (the vocabulary of keyword calls and of
+    settings written before the plugins had their own): flat name -> field name."""
+    cls = settings_class(name)
+    own = {f.name: f.name for f in dataclasses.fields(cls)}
+    return {**own, **cls.LEGACY}
+
+
+@dataclass(frozen=True, init=False)
 class CalibrationSettings:
     """How a calibration runs.
 
@@ -19,25 +29,15 @@ class CalibrationSettings:
     algorithm, ``fit_budget`` objective evaluations each, seeded from the run's seed)
     followed by ``local_algorithm`` with ``polish_budget`` evaluations.
 
-    MCMC (emcee): ``n_walkers`` walkers (0 = 2 x dimensions + 2, the least differential evolution
-    needs, since every walker costs a likelihood evaluation per step; at least 32), run in
-    blocks of ``check_every`` steps until the chain is ``min_tau_multiple`` integrated
-    autocorrelation times long and tau changed by less than ``tau_rtol`` between
-    checks: convergence sets the length. ``time_budget`` (seconds of sampling; None =
-    none) and ``max_steps`` (None = no cap) end a run that has not converged by
-    then (flagged not converged).
-    Burn-in ``burn_tau`` x max tau, thinning ``thin_tau`` x min tau (at least 1).
-    ``store_every``: keep every k-th step in memory and in the HDF5 checkpoint (0 =
-    auto: the chain stays under ~160 MB; tau, burn-in and thinning count steps).
-    Walkers start at the best fit + ``init_ball`` x the local curvature scale of
-    every coordinate (see :func:`.sampler.curvature_scales`); with ``init_modes``
-    they are split over every distinct fit start within 10 nats of the best (rival
-    modes), so a multimodal posterior is started on all the modes the fit found.
-
-    Both samplers: a share ``relabel`` of the moves give an engine's four lines to
-    the roles (a, b, p, m) in a random other order (an exact symmetry of f(x), see
-    :mod:`.space.priors`), so the posterior covers every labelling the prior allows; 0
-    switches it off.
+    Sampler: ``sampler`` names the plugin that samples the posterior (:data:`SAMPLERS`:
+    ``emcee`` default, ``smc``, ``laplace``); ``plugins`` holds every registered
+    plugin's own settings, name -> its frozen dataclass (defaults in the plugin's
+    module; :meth:`of` reads one, :meth:`with_plugin` changes one). Shared by the
+    samplers: ``time_budget`` (seconds of sampling; None = none) ends a run that has
+    not converged by then (flagged not converged); a share ``relabel`` of the moves
+    give an engine's four lines to the roles (a, b, p, m) in a random other order (an
+    exact symmetry of f(x), see :mod:`.space.priors`), so the posterior covers every
+    labelling the prior allows; 0 switches it off. ``progress``: a progress bar.
 
     Likelihood: ``likelihood`` ``auto`` (default) uses the acquisition: when its
     phases are random (``uniform``) or it averages several ramps, the phases are
@@ -62,16 +62,11 @@ class CalibrationSettings:
     ``dtype``: precision of f(x) (float32 is ~2x faster, error ~1e-7 of the peak).
     ``threads``: BLAS/FFT threads (the calibrate verb pins them; 1 is the default).
 
-    Sampler: ``sampler`` ``"emcee"`` (default, the ensemble above) or ``"smc"``
-    (opt-in tempered sequential Monte Carlo from the prior, :mod:`.samplers.tempering`):
-    ``n_particles`` (0 = auto: max(500, 40 x dim)), reweighting to an ESS of
-    ``smc_ess`` x N per stage (0.9: slow tempering; at 0.5 the population collapsed
-    onto a wrong mode on HELI), a share ``smc_redraw`` of the rejuvenation proposals
-    redrawing one coordinate from its uniform prior range (jumps between distant
-    narrow modes), rejuvenation sweeps until a particle has moved with
-    probability ``smc_p_move`` (at most ``smc_max_sweeps`` per stage), at most
-    ``smc_max_stages`` stages. The emcee settings above are then unused (the fit
-    still runs, for the report and the best-fit vector).
+    Keywords: the fields above, ``plugins`` (a mapping name -> settings; plugins left
+    out get their defaults), and a plugin knob by its flat name (``max_steps=``,
+    ``smc_ess=``: the plugin's field or its ``LEGACY`` name; a name two plugins share,
+    ``n_particles``, sets both); reading ``settings.n_walkers`` gives the knob of the
+    chosen plugin, else of the one plugin that has it.
     """
 
     fit_algorithm: str = "GN_CRS2_LM"
@@ -79,17 +74,8 @@ class CalibrationSettings:
     n_starts: int = 4
     fit_budget: int = 6000
     polish_budget: int = 2000
-    n_walkers: int = 0
-    max_steps: int | None = None
     time_budget: float | None = 1200.0
-    check_every: int = 500
-    store_every: int = 0
-    min_tau_multiple: float = 50.0
-    tau_rtol: float = 0.05
-    burn_tau: float = 3.0
-    thin_tau: float = 0.5
-    init_ball: float = 0.5
-    init_modes: bool = True
+    relabel: float = 0.1
     normalisation: str = "peak"
     range_offset: bool = True
     alignment: str = "tone"
@@ -98,16 +84,6 @@ class CalibrationSettings:
     dtype: str = "float32"
     threads: int = 1
     progress: bool = False
-    sampler: str = "emcee"
-    n_particles: int = 0
-    smc_ess: float = 0.9
-    smc_redraw: float = 0.3
-    smc_p_move: float = 0.99
-    smc_max_sweeps: int = 40
-    smc_max_stages: int = 500
-    smc_jump: float = 0.1
-    smc_polish: int = 8
-    relabel: float = 0.1
     likelihood: str = "auto"
     n_acquisitions: int = 16
     ramps_drawn: int = 16
@@ -116,43 +92,51 @@ class CalibrationSettings:
     pair_tol: float = 0.05
     reach_tol: float = 3e-4
     model_floor: float = 0.0
+    sampler: str = "emcee"
+    plugins: tuple = ()  # ((name, settings), ...) in registry order, one per plugin: see of()
 
-    def __post_init__(self) -> None:
+    def __init__(self, *, plugins=None, **knobs) -> None:
+        for f in dataclasses.fields(self):
+            if f.name != "plugins":
+                object.__setattr__(self, f.name, knobs.pop(f.name, f.default))
+        given = dict(plugins or {})
+        unknown = sorted(set(given) - set(SAMPLERS))
+        if unknown:
+            raise ValueError(f"CalibrationSettings: no sampler plugin {unknown[0]!r}; expected one of {SAMPLERS}")
+        own = {name: given.get(name) or settings_class(name)() for name in SAMPLERS}
+        for flat, value in knobs.items():
+            targets = [(name, names[flat]) for name in SAMPLERS if flat in (names := _flat_names(name))]
+            if not targets:
+                raise TypeError(f"CalibrationSettings: unknown setting {flat!r} (neither a shared setting nor a "
+                                f"knob of the sampler plugins {', '.join(SAMPLERS)})")
+            for name, field_name in targets:
+                own[name] = dataclasses.replace(own[name], **{field_name: value})
+        object.__setattr__(self, "plugins", tuple(own.items()))
+        self._check()
+
+    def _check(self) -> None:
         if self.fit_algorithm not in FIT_ALGORITHMS:
             raise ValueError(f"fit_algorithm must be one of {FIT_ALGORITHMS}, got {self.fit_algorithm!r}")
         if self.local_algorithm not in LOCAL_ALGORITHMS + ("none",):
             raise ValueError(f"local_algorithm must be one of {LOCAL_ALGORITHMS} or 'none', "
                              f"got {self.local_algorithm!r}")
-        positive = {"n_starts": self.n_starts, "fit_budget": self.fit_budget,
-                    "check_every": self.check_every, "min_tau_multiple": self.min_tau_multiple,
-                    "threads": self.threads, "init_ball": self.init_ball, "ramps_drawn": self.ramps_drawn,
-                    "stride": self.stride}
-        if self.max_steps is not None:
-            positive["max_steps"] = self.max_steps
+        positive = {"n_starts": self.n_starts, "fit_budget": self.fit_budget, "threads": self.threads,
+                    "ramps_drawn": self.ramps_drawn, "stride": self.stride}
         if self.time_budget is not None:
             positive["time_budget"] = self.time_budget
         for name, value in positive.items():
             if not value > 0:
                 raise ValueError(f"CalibrationSettings.{name} must be > 0, got {value!r}")
-        if self.n_walkers < 0 or self.polish_budget < 0 or self.store_every < 0:
-            raise ValueError("CalibrationSettings.n_walkers, polish_budget and store_every must be >= 0")
+        if self.polish_budget < 0:
+            raise ValueError("CalibrationSettings.polish_budget must be >= 0")
         if not 0 < self.sigma_min < self.sigma_max:
             raise ValueError(f"need 0 < sigma_min < sigma_max, got {self.sigma_min}, {self.sigma_max}")
         if self.alignment not in ("tone", "peak"):
             raise ValueError(f"alignment must be 'tone' or 'peak', got {self.alignment!r}")
         if self.sampler not in SAMPLERS:
             raise ValueError(f"sampler must be one of {SAMPLERS}, got {self.sampler!r}")
-        if not 0 <= self.relabel < 1 or self.smc_jump + self.relabel >= 1:
+        if not 0 <= self.relabel < 1 or self.of("smc").jump + self.relabel >= 1:  # the SMC's shares of moves
             raise ValueError(f"relabel must be in [0, 1) with smc_jump + relabel < 1, got {self.relabel}")
-        if not (0 <= self.smc_jump < 1 and self.smc_redraw + self.smc_jump < 1 and self.smc_polish >= 0):
-            raise ValueError(f"smc_jump must be in [0, 1) with smc_redraw + smc_jump < 1 and smc_polish >= 0, "
-                             f"got {self.smc_jump}, {self.smc_redraw}, {self.smc_polish}")
-        if not (0 < self.smc_ess < 1 and 0 < self.smc_p_move < 1 and 0 <= self.smc_redraw < 1):
-            raise ValueError(f"smc_ess and smc_p_move must be in (0, 1) and smc_redraw in [0, 1), got "
-                             f"{self.smc_ess}, {self.smc_p_move}, {self.smc_redraw}")
-        if self.n_particles < 0 or self.n_particles == 1 or self.smc_max_sweeps < 2 or self.smc_max_stages < 1:
-            raise ValueError("CalibrationSettings: n_particles must be 0 (auto) or >= 2, smc_max_sweeps >= 2 "
-                             "and smc_max_stages >= 1")
         if self.likelihood not in LIKELIHOODS:
             raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {self.likelihood!r}")
         if self.n_acquisitions < 2:
@@ -164,18 +148,80 @@ class CalibrationSettings:
         if self.dtype not in ("float32", "float64"):
             raise ValueError(f"dtype must be float32 or float64, got {self.dtype!r}")
 
+    def of(self, name: str):
+        """Plugin ``name``'s own settings (its frozen dataclass)."""
+        for key, value in self.plugins:
+            if key == name:
+                return value
+        raise ValueError(f"unknown sampler {name!r}; expected one of {SAMPLERS}")
+
+    def __getattr__(self, flat: str):
+        """A plugin knob by its flat name: the chosen plugin's, else the first plugin's
+        that has it (called only for names that are not fields)."""
+        if flat.startswith("_") or flat == "plugins":
+            raise AttributeError(flat)
+        order = [self.sampler] + [n for n in SAMPLERS if n != self.sampler]
+        for name in order:
+            names = _flat_names(name)
+            if flat in names:
+                return getattr(self.of(name), names[flat])
+        raise AttributeError(f"CalibrationSettings has no setting {flat!r}")
+
     @classmethod
     def quick(cls, **kw) -> "CalibrationSettings":
-        """A few-second HELI run for tests and ``--quick``: small fit budget, short
-        chain, 3 particles polished per mode search. It will usually end before
-        50 tau and say so (converged=False)."""
-        base = dict(n_starts=2, fit_budget=1000, polish_budget=2000, max_steps=1000, check_every=250,
-                    n_walkers=32, smc_polish=3, n_acquisitions=8, ramps_drawn=4)
+        """A few-second HELI run for tests and ``--quick``: small fit budget and every
+        plugin's ``quick()`` preset (a short chain, 3 particles polished per mode
+        search). It will usually end before 50 tau and say so (converged=False)."""
+        base = dict(n_starts=2, fit_budget=1000, polish_budget=2000, n_acquisitions=8, ramps_drawn=4,
+                    plugins={name: settings_class(name).quick() for name in SAMPLERS})
         base.update(kw)
         return cls(**base)
 
     def replace(self, **kw) -> "CalibrationSettings":
-        return dataclasses.replace(self, **kw)
+        """A copy with fields, ``plugins`` or flat plugin knobs changed (see the class doc)."""
+        now = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "plugins"}
+        plugins = dict(kw.pop("plugins", self.plugins))
+        return CalibrationSettings(**{**now, **kw, "plugins": plugins})
+
+    def with_plugin(self, name: str, **knobs) -> "CalibrationSettings":
+        """A copy with plugin ``name``'s knobs (its field names) changed."""
+        return self.replace(plugins={**dict(self.plugins), name: self.of(name).replace(**knobs)})
 
     def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
+        """Plain data: the shared fields and ``plugins``: {name: {knob: value}}."""
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "plugins"}
+        out["plugins"] = {name: dataclasses.asdict(s) for name, s in self.plugins}
+        return out
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "CalibrationSettings":
+        """The inverse of :meth:`to_dict`; also reads the flat dicts written before the
+        plugins had their own settings (every knob at the top level). An unknown key or
+        plugin is refused by name."""
+        d = dict(d)
+        nested = d.pop("plugins", None) or {}
+        unknown = sorted(set(nested) - set(SAMPLERS))
+        if unknown:
+            raise ValueError(f"calibration settings name no sampler plugin {unknown[0]!r}; expected one of "
+                             f"{SAMPLERS}")
+        plugins = {}
+        for name, knobs in nested.items():
+            try:
+                plugins[name] = settings_class(name)(**knobs)
+            except TypeError as exc:
+                raise ValueError(f"calibration settings of sampler {name!r}: {exc}") from None
+        try:
+            return cls(plugins=plugins, **d)
+        except TypeError as exc:
+            raise ValueError(str(exc)) from None
+
+    def resume_key(self) -> dict:
+        """The settings a checkpoint must share to be resumed: all but the budgets (the
+        shared time budget, each plugin's ``BUDGETS``), ``progress`` and ``threads``."""
+        out = self.to_dict()
+        for key in ("time_budget", "progress", "threads"):
+            out.pop(key)
+        for name, knobs in out["plugins"].items():
+            for key in settings_class(name).BUDGETS:
+                knobs.pop(key)
+        return out

@@ -67,6 +67,16 @@ class SimulationConfig:
     ceiling_per_class: int = 3000   # simulator-trained classifiers (separability ceiling), the CNN included
 
 
+CALIBRATION_SETTINGS = {"calibration_max_steps": ("emcee", "max_steps"), "calibration_time_budget": "time_budget",
+                        "calibration_starts": "n_starts", "calibration_fit_budget": "fit_budget",
+                        "calibration_draws": "n_acquisitions", "calibration_ramps_drawn": "ramps_drawn"}
+"""The protocol's calibration fields (their names in a study TOML and in results.json) ->
+the :class:`~mdaug.inference.settings.CalibrationSettings` knob each sets: a shared
+setting, or (plugin, knob) of a sampler plugin. Their defaults differ from a lone
+calibration's (a step cap per class, so the same command gives the same numbers); their
+ranges are the settings' own."""
+
+
 @dataclass
 class ProtocolConfig:
     sigma_p: tuple[float, ...] = (0.0, 0.1, 0.2, 0.3, 0.4)  # the published grid: protocol.PUBLISHED_SIGMA_PS
@@ -101,6 +111,21 @@ class ProtocolConfig:
     calibration_fit_budget: int = 1500
     calibration_draws: int = 16
     calibration_ramps_drawn: int = 16
+
+    def calibration_settings(self, quick: bool = False):
+        """The calibration's settings (``CalibrationSettings.quick()`` based when ``quick``)
+        with this protocol's fields (:data:`CALIBRATION_SETTINGS`); the emcee plugin's
+        blocks no longer than its step cap."""
+        from ..inference.settings import CalibrationSettings
+
+        base = CalibrationSettings.quick() if quick else CalibrationSettings()
+        settings = base.replace(**{knob: getattr(self, name) for name, knob in CALIBRATION_SETTINGS.items()
+                                   if isinstance(knob, str)})
+        for name, knob in CALIBRATION_SETTINGS.items():
+            if not isinstance(knob, str):
+                settings = settings.with_plugin(knob[0], **{knob[1]: getattr(self, name)})
+        emcee = base.of("emcee")
+        return settings.with_plugin("emcee", check_every=min(emcee.check_every, self.calibration_max_steps))
 
 
 @dataclass
@@ -181,18 +206,19 @@ class StudyConfig:
         if bad or not p.specimen_widths:
             raise ValueError(f"{src}: protocol.specimen_widths must be a non-empty list of numbers >= 0, "
                              f"got {p.specimen_widths}")
-        if (p.calibration_time_budget is not None and not p.calibration_time_budget > 0) \
-                or p.calibration_draws < 2 or p.calibration_ramps_drawn < 1:
-            raise ValueError(f"{src}: protocol.calibration_time_budget must be > 0 s (or left out), calibration_draws "
-                             ">= 2 and calibration_ramps_drawn >= 1")
+        try:  # the calibration fields' ranges are the settings' own
+            p.calibration_settings()
+        except ValueError as exc:
+            named = [name for name, knob in CALIBRATION_SETTINGS.items()
+                     if (knob if isinstance(knob, str) else knob[1]) in str(exc)]
+            raise ValueError(f"{src}: protocol.{named[0] if named else 'calibration'}: {exc}") from None
         bad = [s for s in p.sigma_p if not 0 <= s <= 1]
         if bad or not p.sigma_p:
             raise ValueError(f"{src}: protocol.sigma_p must be a non-empty list in [0, 1], got {p.sigma_p}")
         if p.cnn_seeds > 64:
             raise ValueError(f"{src}: protocol.cnn_seeds = {p.cnn_seeds}: at most 64 training runs per CNN")
         for name in ("cnn_seeds", "sweep_n_per_class", "cnn_n_per_class", "cnn_epochs", "tsaug_n_per_class",
-                     "tsaug_epochs",
-                     "calibration_max_steps", "calibration_starts", "calibration_fit_budget"):
+                     "tsaug_epochs"):
             if getattr(p, name) < 1:
                 raise ValueError(f"{src}: protocol.{name} must be >= 1")
         _check_names(src, "protocol.calibration_method", (p.calibration_method,), ("auto", "amortized", "likelihood"))

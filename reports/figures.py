@@ -4,8 +4,8 @@ synthetic profiles for :func:`measured_vs_synthetic`), all in the one style of
 legends for every mark.
 
 Each ``*_figure`` function returns a matplotlib figure (the report saves and embeds
-it); :func:`measured_vs_synthetic` writes its PNG (the study's ``profiles_figure``
-stage calls it).
+it); :func:`measured_vs_synthetic` writes :func:`profiles_figure`'s PNG (the study's
+``profiles_figure`` stage calls it).
 """
 from __future__ import annotations
 
@@ -18,14 +18,15 @@ from .style import (M_TO_MM, PAGE_WIDTH_IN, RAD_S_PER_HZ, REFERENCE_STYLE, colou
 
 
 # ---- measured against synthetic profiles ---------------------------------------------------------
-def measured_vs_synthetic(measured: dict, synthetic: dict, path, normalisation: str = "peak",
-                          bin_m: float | None = None, half_width_bins: int = 80):
+def profiles_figure(measured: dict, synthetic: dict, normalisation: str = "peak", bin_m: float | None = None,
+                    half_width_bins: int = 80):
     """Per class, the median and 10-90% band of each source's profiles against range
     from the target in metres (a profile's bin is ``bin_m`` of chain range wide,
-    :attr:`mdaug.radar.RadarConfig.bin_m`; the window is centred on the target).
+    :attr:`mdaug.radar.RadarConfig.bin_m`; the window is centred on the target, the
+    view ``half_width_bins`` bins either side).
 
     measured: {class: (n, L) profiles}; synthetic: {source name: {class: (m, L)}}.
-    All are normalised alike before plotting. Writes ``path`` (PNG).
+    All are normalised alike before plotting. Returns the matplotlib figure.
     """
     from ..radar import RadarConfig, normalise
 
@@ -51,7 +52,13 @@ def measured_vs_synthetic(measured: dict, synthetic: dict, path, normalisation: 
             ax.legend(loc="upper right", fontsize=9)
         axes[-1, 0].set_xlabel(f"range from the target (m; chain range, 1 bin = {1e3 * bin_m:.2f} mm)")
         fig.tight_layout()
-        save(fig, path)
+    return fig
+
+
+def measured_vs_synthetic(measured: dict, synthetic: dict, path, normalisation: str = "peak",
+                          bin_m: float | None = None, half_width_bins: int = 80):
+    """:func:`profiles_figure` written to ``path`` (PNG); returns ``path``."""
+    save(profiles_figure(measured, synthetic, normalisation, bin_m, half_width_bins), path)
     return path
 
 

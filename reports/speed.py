@@ -57,7 +57,7 @@ def stage_speed(acquisition, quick: bool = False) -> dict:
         rows.append({"stage": "likelihood", "setting": f"marginal, O = {o} acquisitions x 8 ramps (HELI, 5 meas.)",
                      "seconds": float(np.median(secs)), "rate": f"{1e3 * np.median(secs):.2f} ms / evaluation",
                      "error": err, "error_metric": "rms Monte Carlo error of the model mean (peak = 1)"})
-    scene = SceneConfig.clean(n_ramps=acquisition.ramps, n_clutter=6)
+    scene = SceneConfig.clean(n_clutter=6).with_acquisition(ramps=acquisition.ramps)
     xs = np.repeat(heli[None], 4 if quick else 16, axis=0)
     t_lit, lit = _timed(lambda: render_through_chain(xs, scene, random_state=5, method="literal"), 1)
     t_red, red = _timed(lambda: render_through_chain(xs, scene, random_state=5, method="reduced"), 1 if quick else 3)

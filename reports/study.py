@@ -135,7 +135,7 @@ class Study(TrainingStages):
         from ..generator.specimens import SpecimenSpread
 
         sim = self.cfg.simulation
-        scene = SceneConfig(n_ramps=sim.ramps)
+        scene = SceneConfig().with_acquisition(ramps=sim.ramps)
         reference = scene.replace(specimens=SpecimenSpread.exact())
         sets, select, new, large = {}, {}, {}, {}
         for cls in self.cfg.classes:
@@ -202,14 +202,7 @@ class Study(TrainingStages):
 
     # ---- stage 2: calibration --------------------------------------------------------
     def _calibration_job(self, cls: str, acquisition) -> dict:
-        from ..inference import CalibrationSettings
-
-        p = self.cfg.protocol
-        base = CalibrationSettings.quick() if self.cfg.quick else CalibrationSettings()
-        settings = base.replace(time_budget=p.calibration_time_budget, n_starts=p.calibration_starts,
-                                fit_budget=p.calibration_fit_budget, n_acquisitions=p.calibration_draws,
-                                ramps_drawn=p.calibration_ramps_drawn, max_steps=p.calibration_max_steps,
-                                check_every=min(base.check_every, p.calibration_max_steps))
+        settings = self.cfg.protocol.calibration_settings(self.cfg.quick)
         return {"cls": cls, "method": self.calibration_method(cls, acquisition),
                 "profiles": self.load_set(f"calibration_{cls}")[0],
                 "drones": self.load_drones(f"calibration_{cls}", cls), "acquisition": acquisition,

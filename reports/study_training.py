@@ -91,7 +91,7 @@ class TrainingStages:
         classes = sorted(self.cfg.classes)
 
         def compute():
-            scene = SceneConfig(n_ramps=sim.ramps)
+            scene = SceneConfig().with_acquisition(ramps=sim.ramps)
             parts, labels = [], []
             for c in self.cfg.classes:
                 rng = seeded_rng(child_seed(self.cfg.seed, "ceiling", c))  # as before: same specimens

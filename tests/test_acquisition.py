@@ -131,7 +131,7 @@ def test_chain_path_renderer_is_the_chain():
     got = r.render(np.repeat(HELI[None], 3, 0), np.random.default_rng(2))
     want = render_through_chain(np.repeat(HELI[None], 3, 0), r.scene_config(), random_state=np.random.default_rng(2))
     np.testing.assert_allclose(got, want.profiles / want.profiles.max(axis=1, keepdims=True), rtol=1e-5)
-    assert r.scene_config().n_ramps == 4 and r.settings()["path"] == "chain"
+    assert r.scene_config().acquisition.ramps == 4 and r.settings()["path"] == "chain"
 
 
 @pytest.mark.slow
@@ -142,7 +142,7 @@ def test_fast_path_matches_the_chain_in_distribution():
     from mdaug.generator.chain import SceneConfig, simulate_campaign
     from mdaug.radar import normalise
 
-    camp = simulate_campaign("HELI", 1, 60, 2, scene=SceneConfig(n_ramps=32, specimen_spread=0.0))
+    camp = simulate_campaign("HELI", 1, 60, 2, scene=SceneConfig().with_acquisition(ramps=32).with_specimens(width=0.0))
     data = normalise(camp.profiles.astype(float), "peak")
     fast = render(np.repeat(HELI[None], 300, 0), Acquisition.measured(32), 0)
     s = slice(120, 280)

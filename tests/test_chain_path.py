@@ -36,7 +36,7 @@ def test_reduced_equals_literal_on_the_same_draws(cls, ramps, n):
     """Clutter on, no noise, no ADC: the same numbers to float32 rounding (measured
     <= 3e-7 of the peak; the acceptance bound is 1e-3), same peak bin and direction,
     same absolute scale."""
-    lit, red = both(rows(cls, n), SceneConfig(n_ramps=ramps, **NO_NOISE), seed=ramps)
+    lit, red = both(rows(cls, n), SceneConfig(**NO_NOISE).with_acquisition(ramps=ramps), seed=ramps)
     assert red.profiles.shape == (n, RADAR.slice_length) and red.profiles.dtype == np.float32
     assert np.abs(peak_normalised(lit) - peak_normalised(red)).max() <= 1e-5
     assert np.abs(lit.profiles - red.profiles).max() <= 1e-5 * lit.profiles.max()
@@ -52,7 +52,7 @@ def test_every_sample_and_interpolated_paths_agree():
     the literal chain to float32 rounding, and each other to ~1e-7 of the peak."""
     x = rows("QUAD", 3)
     x[1, 1::13] *= 3.0  # larger amplitudes: a finer sampling (or every sample) is chosen
-    scene = SceneConfig(n_ramps=3, **NO_NOISE)
+    scene = SceneConfig(**NO_NOISE).with_acquisition(ramps=3)
     lit = render_through_chain(x, scene, random_state=4, method="literal")
     for interpolate in (True, False):
         red = render_through_chain(x, scene, random_state=4, interpolate=interpolate)
@@ -63,7 +63,7 @@ def test_every_sample_and_interpolated_paths_agree():
 @pytest.mark.parametrize("name,scene,chain", [
     ("more frames than one MTI frame", dict(n_frames=13), {}),
     ("drift only in the carrier phase", dict(drift_shifts_range=False), {}),
-    ("fixed phases", dict(phases="fixed"), {}),
+    ("fixed phases", dict(acquisition=SceneConfig().acquisition.replace(phases="fixed")), {}),
     ("4 antennas, 32 angle bins", dict(n_antennas=4), dict(n_angle=32)),
     ("Hann range window", {}, dict(window="hann")),
     ("far azimuth", dict(azimuth_deg=(55.0, 80.0)), {}),
@@ -71,7 +71,7 @@ def test_every_sample_and_interpolated_paths_agree():
     ("window past the last bin", dict(range_m=(9.3, 9.55), clutter_range_m=(1.0, 5.0)), {}),
 ])
 def test_reduced_equals_literal_in_other_scenes(name, scene, chain):
-    lit, red = both(rows("QUAD", 3), SceneConfig(n_ramps=2, **NO_NOISE, **scene), seed=5, chain=ChainConfig(**chain))
+    lit, red = both(rows("QUAD", 3), SceneConfig(**NO_NOISE, **scene).with_acquisition(ramps=2), seed=5, chain=ChainConfig(**chain))
     assert np.abs(peak_normalised(lit) - peak_normalised(red)).max() <= 1e-5, name
     np.testing.assert_array_equal(lit.peak_bin, red.peak_bin)
     np.testing.assert_array_equal(lit.n_missing, red.n_missing)
@@ -86,7 +86,7 @@ def test_adc_rounding_is_the_only_difference_when_quantised(cls):
     per range-angle bin. The reduced path leaves it out; its error is a few sigma_q
     relative to the literal profile's peak (in codes): measured <= 3.2 sigma_q / peak,
     max ~3.5e-4 of the peak at K = 1 (less with more ramps)."""
-    lit, red = both(rows(cls, 24), SceneConfig(n_ramps=1, snr_db=None), seed=2)
+    lit, red = both(rows(cls, 24), SceneConfig(snr_db=None).with_acquisition(ramps=1), seed=2)
     peak = lit.profiles.max(axis=1)
     err = np.abs(peak_normalised(lit) - peak_normalised(red)).max(axis=1)
     sigma_q = np.sqrt(8 * RADAR.samples_per_chirp * (1 + 1 / RADAR.mti_depth) / 12)
@@ -106,7 +106,7 @@ def noise_statistics(n, ramps, seed):
     spread, share of acquisitions whose centre bin moved, share whose direction moved."""
     stats = {"literal": [], "reduced": []}
     for cls in ("HELI", "QUAD"):
-        scene = SceneConfig(n_ramps=ramps, snr_db=10.0, quantise=False)
+        scene = SceneConfig(snr_db=10.0, quantise=False).with_acquisition(ramps=ramps)
         x = rows(cls, n)
         clean = render_through_chain(x, scene.replace(snr_db=None), random_state=seed)
         for method in stats:
@@ -159,7 +159,7 @@ def test_default_scene_both_paths_find_the_target():
 def test_seeds_chunks_and_shapes():
     x = rows("QUAD", 5)
     x[2, 1::13] *= 3.0  # this row is sampled finer than the others: blocks must not change its bytes
-    scene = SceneConfig(n_ramps=2)
+    scene = SceneConfig().with_acquisition(ramps=2)
     a = render_through_chain(x, scene, random_state=11)
     assert isinstance(a, ChainProfiles) and len(a) == 5 and a.method == "reduced"
     assert a.profiles.shape == (5, 400) and a.true_params.shape == (5, 52)

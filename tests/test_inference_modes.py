@@ -1,4 +1,5 @@
-"""Mode jumps of the SMC sampler (mdaug.inference.samplers.modes): the mixture's density is
+"""Mode jumps of the SMC sampler (mdaug.inference.samplers.modes, with the toolbox's Student-t
+mixture and Laplace covariance): the mixture's density is
 exact on the circle, the Laplace covariance is right on a quadratic, jumps give a
 mode no other move can reach its posterior weight, and the mode finder polishes
 to optima and keeps its state (the resume test with jumps is in
@@ -9,8 +10,8 @@ from scipy.special import logsumexp
 
 from mdaug.generator import load_reference, profiles
 from mdaug.inference.likelihood.fitted_phases import LogPosterior
-from mdaug.inference.samplers.modes import ModeFinder, ModeMixture, cap_cov, laplace_cov
-from mdaug.inference.samplers.toolbox import hessian
+from mdaug.inference.samplers.modes import ModeFinder
+from mdaug.inference.samplers.toolbox import StudentMixture, cap_cov, hessian, laplace_covariance
 from mdaug.inference.samplers.tempering import run_smc
 
 
@@ -18,7 +19,7 @@ def test_mixture_density_is_normalised_on_the_circle_and_matches_its_draws():
     rng = np.random.default_rng(0)
     # phase scale 2 rad: about a sixth of the t draws fall outside [-pi, pi) and are redrawn
     cov = np.array([[2.0**2, 0.6], [0.6, 1.0]])
-    mix = ModeMixture.build([[2.5, 0.0], [-1.0, 3.0]], [cov, 0.3 * cov], phase_cols=[0], rng=rng, n_mc=20000)
+    mix = StudentMixture.build([[2.5, 0.0], [-1.0, 3.0]], [cov, 0.3 * cov], phase_cols=[0], rng=rng, n_mc=20000)
     assert mix.log_mass[0] < np.log(0.9)  # truncation matters for this component
     n, half = 400_000, 40.0
     u = np.column_stack([rng.uniform(-np.pi, np.pi, n), rng.uniform(-half, half, n)])
@@ -37,7 +38,7 @@ def test_hessian_and_laplace_covariance_of_a_quadratic():
     loglik = lambda th: -0.5 * np.einsum("ni,ij,nj->n", th, prec, th)  # noqa: E731
     h = hessian(loglik, np.zeros(3), np.array([0.1, 0.1, 0.1]))
     np.testing.assert_allclose(h, -prec, atol=1e-8)
-    got = laplace_cov(h, np.ones(3), max_sd=np.array([10.0, 10.0, 5.0]))
+    got = laplace_covariance(h, np.ones(3), max_sd=np.array([10.0, 10.0, 5.0]))
     np.testing.assert_allclose(got[:2, :2], cov[:2, :2], rtol=1e-6)
     assert got[2, 2] == pytest.approx(25.0)  # capped at max_sd
     np.testing.assert_allclose(np.diag(cap_cov(cov, np.full(3, 1.0))), [1.0, 1.0, 1.0])
@@ -62,7 +63,7 @@ class KnownModes:
     """The mode-finder interface with fixed modes (as if the fit had found them)."""
 
     def __init__(self):
-        self.mix = ModeMixture.build([BROAD, NARROW], [np.eye(2) * 2.0**2, np.eye(2) * 0.05**2], [],
+        self.mix = StudentMixture.build([BROAD, NARROW], [np.eye(2) * 2.0**2, np.eye(2) * 0.05**2], [],
                                      np.random.default_rng(0))
 
     def update(self, theta, beta, rng):

@@ -4,7 +4,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from mdaug.inference.samplers.laplace import LaplaceSampler
+from mdaug.inference.samplers.laplace import LaplaceSampler, LaplaceSettings
+from mdaug.inference.settings import CalibrationSettings
 from mdaug.inference.samplers.toolbox import hessian, systematic_resample
 from mdaug.inference.samplers import get_sampler
 
@@ -16,7 +17,8 @@ class Target:
         self.logpdf, self.lo, self.hi = logpdf, np.asarray(lo, float), np.asarray(hi, float)
         d = len(self.lo)
         bounds = lambda: (self.lo.copy(), self.hi.copy())  # noqa: E731
-        self.layout = SimpleNamespace(dim=d, dim_z=d, n_shared=d, marginal=True, theta_bounds=bounds, z_bounds=bounds)
+        self.layout = SimpleNamespace(dim=d, dim_z=d, n_shared=d, marginal=True, phase_cols=np.array([], int),
+                                      theta_bounds=bounds, z_bounds=bounds)
 
     def log_prior(self, x):
         x = np.atleast_2d(x)
@@ -35,7 +37,7 @@ class Target:
 
 
 def _settings(n=4000):
-    return SimpleNamespace(n_particles=n)
+    return CalibrationSettings(sampler="laplace", plugins={"laplace": LaplaceSettings(n_particles=n)})
 
 
 def _fit(post, *modes):
@@ -84,9 +86,11 @@ def test_modes_the_fit_found_get_their_mass():
 
 
 def test_tails_heavier_than_the_proposal_are_not_called_converged():
-    """A Cauchy-tailed posterior: the Gaussian at the fit has lighter tails, the
-    weights' Pareto k-hat says so and the run is flagged."""
-    post = Target(lambda x: -np.sum(np.log1p((x / 0.01) ** 2), 1), [-4, -4], [4, 4])
+    """A posterior with 1/|x| tails in each coordinate (heavier than Cauchy; proper on its
+    box only): the Student-t at the fit has far lighter tails, the weights' Pareto
+    k-hat or ESS says so and the run is flagged (on 30 seeds: never converged; a
+    Cauchy target was flagged on only 60-90% of seeds, too close to the edge to test)."""
+    post = Target(lambda x: -0.5 * np.sum(np.log1p((x / 0.01) ** 2), 1), [-4, -4], [4, 4])
     run = LaplaceSampler().run(post, _fit(post, [0.0, 0.0]), _settings(4000), np.random.SeedSequence(3))
     assert not run.converged
     assert "k-hat" in run.reason or "ESS" in run.reason

@@ -322,10 +322,36 @@ def test_figures_have_units_and_readable_fonts(report):
 
 
 def test_profiles_figure_is_in_metres(tmp_path):
+    """x is range from the target in metres: the label says m (and the bin in mm), every
+    curve spans the 400-bin slice's length in metres of the radar's chain range, centred
+    on the target, and the view is the +-80 bins around it."""
+    from mdaug.radar import RadarConfig
+
+    radar = RadarConfig()
+    n_bins, bin_m = radar.slice_length, radar.bin_m
     rng = np.random.default_rng(0)
-    prof = {c: rng.random((5, 400)) for c in CLASSES}
+    prof = {c: rng.random((5, n_bins)) for c in CLASSES}
+    fig = figures.profiles_figure(prof, {"posterior": prof})
+    axes = fig.axes
+    assert len(axes) == len(CLASSES)
+    label = axes[-1].get_xlabel()
+    assert label.startswith("range from the target (m;") and f"1 bin = {1e3 * bin_m:.2f} mm" in label
+    for ax in axes:
+        lines = ax.get_lines()
+        assert len(lines) == 2  # measured and posterior medians
+        for line in lines:
+            x = np.asarray(line.get_xdata())
+            assert len(x) == n_bins
+            assert x[-1] - x[0] + bin_m == pytest.approx(n_bins * bin_m)  # the slice's length in metres
+            assert x[n_bins // 2] == 0.0 and np.allclose(np.diff(x), bin_m)
+        assert ax.get_xlim() == pytest.approx((-80 * bin_m, 80 * bin_m))
+    other = figures.profiles_figure(prof, {}, bin_m=0.01)
+    wide = other.axes[0].get_lines()[0].get_xdata()
+    assert wide[-1] - wide[0] == pytest.approx((n_bins - 1) * 0.01)  # bins become metres at the given width
+    figures.pyplot().close(fig)
+    figures.pyplot().close(other)
     path = figures.measured_vs_synthetic(prof, {"posterior": prof}, tmp_path / "p.png")
-    assert path.is_file()
+    assert path.is_file() and path.stat().st_size > 0
 
 
 # ---- the README ----------------------------------------------------------------------------------

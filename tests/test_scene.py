@@ -24,8 +24,8 @@ def test_clean_fixed_phase_acquisition_is_the_generators_f_x(cls, ramps):
     positive bins: its phase follows -carrier, not +carrier, so the MTI treats it
     differently (~1 / (pi * 2 * bin * N_s / N_fft) of the peak)."""
     ref = load_reference(cls).to_array()
-    scene = SceneConfig.clean(phases="fixed", specimen_spread=0.0, drift_shifts_range=False, n_ramps=ramps,
-                              dtype="float64")
+    scene = SceneConfig.clean(drift_shifts_range=False, dtype="float64").with_acquisition(phases="fixed", ramps=ramps)
+    scene = scene.with_specimens(width=0.0)
     camp = simulate_campaign(cls, 1, 3, seed=4, scene=scene)
     np.testing.assert_array_equal(camp.true_params, np.repeat(ref[None], 3, axis=0))
     fx, info = profiles(camp.true_params, r0=camp.range_true_m / 2, n_ramps=ramps, dtype="float64",
@@ -34,7 +34,7 @@ def test_clean_fixed_phase_acquisition_is_the_generators_f_x(cls, ramps):
     assert np.abs(sig - fx).max() < 5e-3
     np.testing.assert_array_equal(np.rint(camp.range_m / RADAR.bin_m), info.peak_bin)
     # the check can fail: random phases per frame do not give f(x) at the stored phases
-    moving = simulate_campaign(cls, 1, 3, seed=4, scene=scene.replace(phases="uniform"))
+    moving = simulate_campaign(cls, 1, 3, seed=4, scene=scene.with_acquisition(phases="uniform"))
     fx_m = profiles(moving.true_params, r0=moving.range_true_m / 2, n_ramps=ramps, dtype="float64")
     assert np.abs(moving.profiles / moving.profiles.max(axis=1, keepdims=True) - fx_m).max() > 2e-2
 
@@ -61,8 +61,7 @@ def test_same_seed_same_bytes_other_seed_differs():
 
 def test_specimens_share_a_motor_speed_factor():
     ref = load_reference("QUAD").to_array()
-    scene = SceneConfig(speed_spread=0.1, frequency_spread=0.0, amplitude_spread=0.0, gamma_spread=0.0,
-                        skew_spread=0.0)
+    scene = SceneConfig().with_specimens(speed=0.1, frequency=0.0, amplitude=0.0, gamma=0.0, skew=0.0)
     spec = draw_specimens(ref, 5, scene, np.random.default_rng(0))
     cols = [k * N_PARAMS + IDX[c] for k in range(4) for c in ("w_a", "w_b")]
     ratio = spec[:, cols] / ref[cols]
@@ -70,7 +69,7 @@ def test_specimens_share_a_motor_speed_factor():
     assert ratio[:, 0].std() > 0.03
     others = [i for i in range(ref.size) if i not in cols]
     np.testing.assert_array_equal(spec[:, others], np.repeat(ref[None, others], 5, axis=0))
-    exact = draw_specimens(ref, 3, SceneConfig(specimen_spread=0.0), np.random.default_rng(0))
+    exact = draw_specimens(ref, 3, SceneConfig().with_specimens(width=0.0), np.random.default_rng(0))
     np.testing.assert_array_equal(exact, np.repeat(ref[None], 3, axis=0))
 
 
@@ -93,13 +92,13 @@ def _one_cube(scene, seed=0, cls="HELI"):
 
 
 def test_noise_level_matches_the_snr_and_adc_codes_fit_12_bits():
-    base = SceneConfig.clean(n_ramps=2)
+    base = SceneConfig.clean().with_acquisition(ramps=2)
     clean, _ = _one_cube(base)
     noisy, _ = _one_cube(base.replace(snr_db=6.0))
     p_s = np.mean(clean.astype(np.float64) ** 2)
     measured_db = 10 * np.log10(p_s / np.var(noisy - clean))
     assert measured_db == pytest.approx(6.0, abs=0.1)
-    codes, _ = _one_cube(SceneConfig(n_ramps=2))
+    codes, _ = _one_cube(SceneConfig().with_acquisition(ramps=2))
     assert codes.dtype == np.int16 and codes.shape == (11, 2, 8, RADAR.samples_per_chirp)
     assert np.abs(codes).max() == round(0.7 * 2047)  # gain control: the largest sample at 70% of full scale
 
@@ -113,7 +112,7 @@ def test_hover_drift_moves_the_range_between_frames():
 
 
 def test_save_load_and_measured_profile_reader(tmp_path):
-    camp = simulate_campaign("HELI", 1, 3, seed=5, scene=SceneConfig(n_ramps=1), keep_cubes=True)
+    camp = simulate_campaign("HELI", 1, 3, seed=5, scene=SceneConfig().with_acquisition(ramps=1), keep_cubes=True)
     path = tmp_path / "camp.npz"
     camp.save(path)
     back = load_campaign(path)
@@ -148,8 +147,21 @@ def test_simulate_then_process_cli_round_trip(tmp_path, capsys):
     ({"agc_fill": 1.5}, "agc_fill"), ({"drift_step_m": -1.0}, "drift_step_m"),
 ])
 def test_bad_scene_settings(kw, match):
+    """A file's scene table (its keys, K as n_ramps) is checked by key."""
     with pytest.raises(ValueError, match=match):
-        SceneConfig(**kw)
+        SceneConfig.from_dict(kw)
+
+
+def test_the_scene_has_one_spelling_of_k_and_its_file_table_round_trips():
+    scene = SceneConfig().with_acquisition(ramps=3, yaw_deg=5.0).with_specimens(width=0.5).replace(n_clutter=2)
+    table = json.loads(json.dumps(scene.to_dict()))  # as a campaign file stores it
+    assert table["n_ramps"] == 3 and table["specimen_spread"] == 0.5 and table["yaw_deg"] == 5.0
+    assert SceneConfig.from_dict(table) == scene
+    assert not hasattr(scene, "n_ramps")  # K is scene.acquisition.ramps
+    with pytest.raises(TypeError, match="acquisition's fields"):
+        SceneConfig(n_ramps=2)
+    with pytest.raises(ValueError, match=r"unknown key\(s\) \['ramps'\]"):
+        SceneConfig.from_dict({"ramps": 2})
 
 
 def test_bad_campaign_sizes():
@@ -160,8 +172,8 @@ def test_bad_campaign_sizes():
 
 
 def test_campaigns_merge_into_one_labelled_set():
-    h = simulate_campaign("HELI", 1, 2, seed=1, scene=SceneConfig(n_ramps=1))
-    q = simulate_campaign("QUAD", 1, 3, seed=2, scene=SceneConfig(n_ramps=1))
+    h = simulate_campaign("HELI", 1, 2, seed=1, scene=SceneConfig().with_acquisition(ramps=1))
+    q = simulate_campaign("QUAD", 1, 3, seed=2, scene=SceneConfig().with_acquisition(ramps=1))
     ps = as_profile_set(h, q)
     assert ps.profiles.shape == (5, 400) and ps.labels.tolist() == ["HELI"] * 2 + ["QUAD"] * 3
     np.testing.assert_array_equal(ps.select("QUAD"), q.profiles.astype(np.float64))

@@ -76,3 +76,27 @@ def test_stage_cache_resumes_and_recomputes_on_a_new_key(tmp_path):
     assert again.run("s", settings_key(1), compute) == {"v": 1} and again.resumed == ["s"]
     assert again.run("s", settings_key(2), compute) == {"v": 2}
     assert len(calls) == 2
+
+
+def test_the_protocol_sets_the_calibration_settings_it_names(tmp_path):
+    """The protocol's calibration fields are calibration settings under their study
+    names (reports.config.CALIBRATION_SETTINGS): each reaches the setting it names, the
+    emcee blocks are no longer than the step cap, and a bad value is refused by the
+    settings' own rule, named by the protocol field."""
+    from mdaug.inference.settings import CalibrationSettings
+    from mdaug.reports.config import CALIBRATION_SETTINGS, ProtocolConfig
+
+    p = ProtocolConfig(calibration_max_steps=120, calibration_time_budget=30.0, calibration_starts=3,
+                       calibration_fit_budget=700, calibration_draws=5, calibration_ramps_drawn=2)
+    s = p.calibration_settings()
+    assert s == CalibrationSettings(time_budget=30.0, n_starts=3, fit_budget=700, n_acquisitions=5, ramps_drawn=2,
+                                    max_steps=120, check_every=120)
+    named = {f for f in vars(p) if f.startswith("calibration_") and f != "calibration_method"}
+    assert set(CALIBRATION_SETTINGS) == named
+    q = p.calibration_settings(quick=True)
+    assert q.of("emcee").n_walkers == CalibrationSettings.quick().of("emcee").n_walkers and q.n_starts == 3
+    for line, field in (("calibration_draws = 1", "calibration_draws"),
+                        ("calibration_max_steps = 0", "calibration_max_steps"),
+                        ("calibration_time_budget = -1.0", "calibration_time_budget")):
+        with pytest.raises(ValueError, match=f"protocol.{field}: "):
+            load_config(_write(tmp_path / "p.toml", f"[protocol]\n{line}\n"))

@@ -112,7 +112,8 @@ def test_a_drone_posterior_is_reused_only_under_the_same_options():
 def test_calibrate_population_reuses_only_under_the_same_options(tmp_path, capsys):
     from mdaug.cli import main
 
-    fast = ["--sampler", "laplace", "--starts", "1", "--fit-budget", "60", "--particles", "200", "--allow-unconverged"]
+    fast = ["--method", "likelihood", "--sampler", "laplace", "--starts", "1", "--fit-budget", "60", "--particles",
+            "200", "--allow-unconverged"]
     assert main(["simulate", "--class", "HELI", "--specimens", "2", "--acquisitions", "4", "--ramps", "4", "--seed",
                  "2", "--out", str(tmp_path / "d.npz")]) == 0
     cal = ["calibrate", str(tmp_path / "d.npz"), "--class", "HELI", "--population", *fast, "--out",

@@ -60,8 +60,7 @@ class Campaign:
     @property
     def acquisition(self):
         """The acquisition of the campaign's profiles (:meth:`SceneConfig.acquisition_for`)."""
-        scene = SceneConfig(**{k: (tuple(v) if isinstance(v, list) else v)
-                               for k, v in self.settings.get("scene", {}).items()})
+        scene = SceneConfig.from_dict(self.settings.get("scene", {}))
         radar = RadarConfig.from_dict(self.settings["radar"]) if "radar" in self.settings else RadarConfig()
         return scene.acquisition_for(radar)
 

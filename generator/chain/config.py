@@ -7,10 +7,12 @@ return (``carrier``, x sum(Gamma)). The specimen model states how the drones of 
 class differ. Everything else (range, azimuth, hover drift, clutter, receiver noise
 as an SNR, ADC, antennas, frames, dtype) is the scene's own.
 
-The old flat keywords still build (and ``replace``) a scene, and read back as
-attributes: :data:`FLAT_ACQUISITION` and :data:`FLAT_SPECIMENS` say which field of
-which part each names. :meth:`SceneConfig.to_dict` is the flat table (the
-``scene`` of a campaign's or a chain path's settings, as campaign files store it).
+A scene is built and changed through its parts and its own fields only: K is
+``scene.acquisition.ramps``, one spelling. The flat table is the file format:
+:meth:`SceneConfig.to_dict` writes it (the ``scene`` of a campaign's or a chain path's
+settings, as campaign files store it, with K as ``n_ramps``) and
+:meth:`SceneConfig.from_dict` reads it; :data:`FLAT_ACQUISITION` and
+:data:`FLAT_SPECIMENS` say which field of which part each of its keys names.
 """
 from __future__ import annotations
 
@@ -30,10 +32,10 @@ up to 0.3 sum(Gamma) (its fast-path fields, jitter, noise floor, MTI and drift, 
 the measured preset's: they describe this scene to the fast path)."""
 
 FLAT_ACQUISITION = {"n_ramps": "ramps", "phases": "phases", "yaw_deg": "yaw_deg", "body_ratio": "carrier"}
-"""Old flat keyword -> field of the scene's :class:`Acquisition`."""
+"""File-table key -> field of the scene's :class:`Acquisition`."""
 FLAT_SPECIMENS = {"speed_spread": "speed", "frequency_spread": "frequency", "amplitude_spread": "amplitude",
                   "gamma_spread": "gamma", "skew_spread": "skew", "specimen_spread": "width"}
-"""Old flat keyword -> field of the scene's :class:`SpecimenSpread`."""
+"""File-table key -> field of the scene's :class:`SpecimenSpread`."""
 FLAT_KEYS = ("n_frames", "n_ramps", "n_antennas", "snr_db", "phases", "range_m", "azimuth_deg", "yaw_deg",
              "drift_step_m", "drift_shifts_range", "body_ratio", "n_clutter", "clutter_db", "clutter_range_m",
              "clutter_azimuth_deg", "quantise", "agc_fill", "speed_spread", "frequency_spread", "amplitude_spread",
@@ -77,8 +79,7 @@ class SceneConfig:
 
     ``acquisition`` (ramps, phases, yaw, body return) and ``specimens`` (the specimen
     model) plus the scene's own fields below. Ranges are physical (= chain) metres,
-    angles degrees, levels dB. Build it from the parts, from the old flat keywords
-    (module doc), or both: flat keywords then change the given parts.
+    angles degrees, levels dB. A file's flat table builds one with :meth:`from_dict`.
     """
 
     acquisition: Acquisition = SCENE_ACQUISITION
@@ -101,20 +102,19 @@ class SceneConfig:
     def __init__(self, acquisition: Acquisition = SCENE_ACQUISITION, specimens: SpecimenSpread = SpecimenSpread(),
                  **kw):
         own = {f.name: f.default for f in dataclasses.fields(self)[2:]}
-        unknown = sorted(set(kw) - set(own) - set(FLAT_ACQUISITION) - set(FLAT_SPECIMENS))
+        unknown = sorted(set(kw) - set(own))
         if unknown:
-            raise TypeError(f"SceneConfig() got unexpected keyword argument(s) {unknown}")
+            raise TypeError(f"SceneConfig() got unexpected keyword argument(s) {unknown} (K and the phases, yaw "
+                            "and body return are the acquisition's fields, the spreads the specimens')")
         if not isinstance(acquisition, Acquisition):
             raise ValueError(f"SceneConfig.acquisition must be an Acquisition, got {type(acquisition).__name__}")
         if not isinstance(specimens, SpecimenSpread):
             raise ValueError(f"SceneConfig.specimens must be a SpecimenSpread, got {type(specimens).__name__}")
         parts = {**{k: getattr(acquisition, v) for k, v in FLAT_ACQUISITION.items()},
                  **{k: getattr(specimens, v) for k, v in FLAT_SPECIMENS.items()}}
-        flat = _check_flat({**own, **parts, **kw})
-        acq = {FLAT_ACQUISITION[k]: flat[k] for k in FLAT_ACQUISITION if k in kw}
-        spec = {FLAT_SPECIMENS[k]: flat[k] for k in FLAT_SPECIMENS if k in kw}
-        object.__setattr__(self, "acquisition", acquisition.replace(**acq) if acq else acquisition)
-        object.__setattr__(self, "specimens", specimens.replace(**spec) if spec else specimens)
+        flat = _check_flat({**own, **parts, **kw})  # errors name the file table's keys
+        object.__setattr__(self, "acquisition", acquisition)
+        object.__setattr__(self, "specimens", specimens)
         for name in own:
             object.__setattr__(self, name, flat[name])
 
@@ -130,26 +130,40 @@ class SceneConfig:
         return self.acquisition.replace(mti_depth=radar.mti_depth)
 
     def replace(self, **changes) -> "SceneConfig":
-        """A copy with fields changed: the parts, the scene's own fields or flat keywords."""
+        """A copy with fields changed: the parts or the scene's own fields."""
         own = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         return SceneConfig(**{**own, **changes})
 
+    def with_acquisition(self, **changes) -> "SceneConfig":
+        """A copy with fields of its acquisition changed (e.g. ``ramps=K``)."""
+        return self.replace(acquisition=self.acquisition.replace(**changes))
+
+    def with_specimens(self, **changes) -> "SceneConfig":
+        """A copy with fields of its specimen model changed (e.g. ``width=0.0``)."""
+        return self.replace(specimens=self.specimens.replace(**changes))
+
     def to_dict(self) -> dict:
-        """The flat table (:data:`FLAT_KEYS`, module doc)."""
-        return {k: getattr(self, k) for k in FLAT_KEYS}
+        """The flat table of files (:data:`FLAT_KEYS`, module doc)."""
+        parts = {**{k: getattr(self.acquisition, v) for k, v in FLAT_ACQUISITION.items()},
+                 **{k: getattr(self.specimens, v) for k, v in FLAT_SPECIMENS.items()}}
+        return {k: parts[k] if k in parts else getattr(self, k) for k in FLAT_KEYS}
 
     @classmethod
-    def clean(cls, **changes) -> "SceneConfig":
+    def from_dict(cls, flat: dict, acquisition: Acquisition = SCENE_ACQUISITION) -> "SceneConfig":
+        """The scene a file's flat table states (keys of :data:`FLAT_KEYS`; those left
+        out keep the default scene's values, the acquisition's other fields
+        ``acquisition``'s); lists read as pairs. An unknown key is refused by name."""
+        flat = {k: (tuple(v) if isinstance(v, list) else v) for k, v in flat.items()}
+        unknown = sorted(set(flat) - set(FLAT_KEYS))
+        if unknown:
+            raise ValueError(f"scene settings: unknown key(s) {unknown}; expected some of {list(FLAT_KEYS)}")
+        _check_flat({**cls(acquisition=acquisition).to_dict(), **flat})  # errors name the table's keys
+        acq = {v: flat.pop(k) for k, v in FLAT_ACQUISITION.items() if k in flat}
+        spec = {v: flat.pop(k) for k, v in FLAT_SPECIMENS.items() if k in flat}
+        return cls(acquisition=acquisition.replace(**acq), specimens=SpecimenSpread().replace(**spec), **flat)
+
+    @classmethod
+    def clean(cls, acquisition: Acquisition = SCENE_ACQUISITION, **changes) -> "SceneConfig":
         """A noise-, clutter-, body-, yaw- and quantisation-free scene (for checks)."""
-        base = dict(snr_db=None, n_clutter=0, body_ratio=(0.0, 0.0), yaw_deg=0.0, quantise=False)
-        return cls(**{**base, **changes})
-
-
-def _reader(part: str, name: str, flat: str) -> property:
-    return property(lambda self: getattr(getattr(self, part), name), doc=f"``{part}.{name}`` (old flat {flat!r})")
-
-
-for _flat, _name in FLAT_ACQUISITION.items():
-    setattr(SceneConfig, _flat, _reader("acquisition", _name, _flat))
-for _flat, _name in FLAT_SPECIMENS.items():
-    setattr(SceneConfig, _flat, _reader("specimens", _name, _flat))
+        base = dict(snr_db=None, n_clutter=0, quantise=False)
+        return cls(acquisition=acquisition.replace(carrier=(0.0, 0.0), yaw_deg=0.0), **{**base, **changes})

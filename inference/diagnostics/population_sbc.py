@@ -88,7 +88,7 @@ def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n
 
     truth_ss, data_ss, run_ss, pop_ss, draw_ss = ss.spawn(5)
     spreads = hyperprior.sample(1, np.random.default_rng(truth_ss))[0]
-    scene = SceneConfig(n_ramps=ramps, specimens=SpecimenSpread(**dict(zip(SPREADS, spreads.tolist()))))
+    scene = SceneConfig(specimens=SpecimenSpread(**dict(zip(SPREADS, spreads.tolist())))).with_acquisition(ramps=ramps)
     t0 = time.perf_counter()
     if method == "amortized":  # the class mean from the calibration prior the drones' posteriors were trained on
         mean, data_seed = _mean_inside_prior(ref, n_drones + 1, scene, truth_ss, data_ss)

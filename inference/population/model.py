@@ -210,6 +210,7 @@ def sample_spreads(drones: list[DroneSummary], model: PopulationModel, hyperprio
     conditional given each spread draw), the measured mask (p,), tau, steps, whether
     it converged and why."""
     from ..samplers.emcee_run import run_ensemble
+    from ..samplers.ensemble import EmceeSettings
     from ..settings import CalibrationSettings
 
     measured = np.any([d.mask for d in drones], axis=0)  # none: the spreads keep their prior
@@ -223,9 +224,9 @@ def sample_spreads(drones: list[DroneSummary], model: PopulationModel, hyperprio
         return out
 
     u0 = np.log(hyperprior.sample(n_walkers, rng) + 1e-6)
-    settings = CalibrationSettings(max_steps=max_steps, time_budget=time_budget, check_every=block,
-                                   min_tau_multiple=min_tau_multiple, relabel=0.0, store_every=1,
-                                   progress=bool(progress))
+    emcee = EmceeSettings(max_steps=max_steps, check_every=block, min_tau_multiple=min_tau_multiple, store_every=1)
+    settings = CalibrationSettings(time_budget=time_budget, relabel=0.0, progress=bool(progress),
+                                   plugins={"emcee": emcee})
     run = run_ensemble(log_post, u0, settings, int(rng.integers(2**31 - 1)))
     u = run.draws()
     spreads = np.exp(u)

@@ -1,16 +1,17 @@
 """What every sampler plugin shares: the interface (:class:`Sampler`), the one result
-type (:class:`SamplerRun`), and the Ctrl-C handling (:func:`stop_on_sigint`,
+type (:class:`SamplerRun`), the base of every plugin's settings (:class:`PluginSettings`), and the Ctrl-C handling (:func:`stop_on_sigint`,
 :class:`CalibrationInterrupted`: a sampler stops at its next step boundary with its
-checkpoint saved). Every plugin (:mod:`.ensemble`, :mod:`.tempering`, :mod:`.laplace`)
+checkpoint saved). Every plugin (:mod:`.ensemble`, :mod:`.smc`, :mod:`.laplace`)
 imports this; the registry that names them is the room's face, :mod:`mdaug.inference.samplers`.
 """
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import signal
 import threading
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import ClassVar, Protocol
 
 import numpy as np
 
@@ -64,6 +65,24 @@ class SamplerRun:
 
     def draws_log_prob(self) -> np.ndarray:
         return self.log_prob[self._rows()].reshape(-1)
+
+
+class PluginSettings:
+    """Base of a plugin's own settings (a frozen dataclass in the plugin's module, its
+    knobs and defaults its fields). ``LEGACY``: flat name -> field, for the names
+    CalibrationSettings gave the knobs before each plugin had its own (a field's own
+    name needs no entry); ``BUDGETS``: knobs a resumed run may change; ``quick()``:
+    the preset of tests and ``--quick``."""
+
+    LEGACY: ClassVar[dict] = {}
+    BUDGETS: ClassVar[tuple] = ()
+
+    @classmethod
+    def quick(cls):
+        return cls()
+
+    def replace(self, **kw):
+        return dataclasses.replace(self, **kw)
 
 
 class Sampler(Protocol):

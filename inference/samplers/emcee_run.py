@@ -48,12 +48,13 @@ MAX_STORED_FLOATS = 2e7  # chain kept in memory / on disk: ~160 MB of float64
 AUTO_MAX_STEPS = 100_000  # steps the automatic storage interval plans for when no step cap is set
 
 
-def store_interval(settings, n_walkers: int, dim: int) -> int:
-    """Steps per stored step: ``settings.store_every`` or, when 0, the smallest k that
-    keeps (max_steps or AUTO_MAX_STEPS) / k x walkers x dim under MAX_STORED_FLOATS."""
-    if settings.store_every:
-        return int(settings.store_every)
-    steps = settings.max_steps or AUTO_MAX_STEPS
+def store_interval(own, n_walkers: int, dim: int) -> int:
+    """Steps per stored step: ``own.store_every`` (an :class:`.ensemble.EmceeSettings`) or,
+    when 0, the smallest k that keeps (max_steps or AUTO_MAX_STEPS) / k x walkers x dim
+    under MAX_STORED_FLOATS."""
+    if own.store_every:
+        return int(own.store_every)
+    steps = own.max_steps or AUTO_MAX_STEPS
     return max(1, int(np.ceil(steps * n_walkers * dim / MAX_STORED_FLOATS)))
 
 
@@ -132,7 +133,10 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
     """Run (or resume) the ensemble; see the module docstring.
 
     log_post: vectorised callable theta (W, dim) -> (W,); p0: (W, dim) start (ignored
-    when the backend already holds steps); seed: int for emcee's RandomState;
+    when the backend already holds steps); settings: the shared
+    :class:`~mdaug.inference.settings.CalibrationSettings` (``time_budget``,
+    ``relabel``, ``progress``; the emcee knobs at ``settings.of("emcee")``, an
+    :class:`.ensemble.EmceeSettings`); seed: int for emcee's RandomState;
     phase_cols: columns that live on the circle (wrapped by the moves); relabel: the
     exact-symmetry move (``settings.relabel`` of the steps), proposal: an independence
     proposal for ``p_proposal`` of the steps, see :func:`make_moves`.
@@ -146,6 +150,7 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
     from ...radar.progress import progress_bar
 
     t0 = time.perf_counter()
+    own = settings.of("emcee")
     n_walkers, dim = p0.shape
     moves = make_moves(phase_cols, dim, relabel, settings.relabel, proposal, p_proposal)
     backend, resumed_at = None, 0
@@ -163,19 +168,19 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
             if resumed_at:  # keep the stored interval of the file
                 stored_k = int(g.attrs.get("mdaug_store_every", 1))
             else:
-                g.attrs["mdaug_store_every"] = stored_k = store_interval(settings, n_walkers, dim)
+                g.attrs["mdaug_store_every"] = stored_k = store_interval(own, n_walkers, dim)
     sampler = emcee.EnsembleSampler(n_walkers, dim, log_post, vectorize=True, moves=moves, backend=backend)
     if resumed_at:
         state = None  # emcee restores the last walkers, log-probs and random state
     else:
         state = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
-    k = stored_k if backend_path is not None else store_interval(settings, n_walkers, dim)
-    check = -(-settings.check_every // k) * k  # block length, a multiple of k steps
-    max_steps = None if settings.max_steps is None else max(k, settings.max_steps // k * k)
+    k = stored_k if backend_path is not None else store_interval(own, n_walkers, dim)
+    check = -(-own.check_every // k) * k  # block length, a multiple of k steps
+    max_steps = None if own.max_steps is None else max(k, own.max_steps // k * k)
     it = resumed_at * k  # steps done (the backend counts stored steps)
     tau, converged, reason, out_of_time = np.full(dim, np.inf), False, "", False
     budget = settings.time_budget
-    target = settings.min_tau_multiple * 20.0  # steps: a first guess, replaced at every check
+    target = own.min_tau_multiple * 20.0  # steps: a first guess, replaced at every check
 
     def bar_total(goal: float) -> int:  # the 50 tau goal, never past the step cap
         return int(goal if max_steps is None else min(goal, max_steps))
@@ -188,26 +193,26 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
                 if it > 0 and it % check == 0 or (max_steps is not None and it >= max_steps) or out_of_time:
                     chain = sampler.get_chain()
                     tau = estimate_tau(chain, phase_cols) * k
-                    long_enough = it >= settings.min_tau_multiple * tau.max()
-                    target = settings.min_tau_multiple * tau.max()
+                    long_enough = it >= own.min_tau_multiple * tau.max()
+                    target = own.min_tau_multiple * tau.max()
                     bar.total = max(bar_total(target), it)
                     bar.set_postfix_str(f"tau {tau.max():.0f}, {it / tau.max():.1f} tau of "
-                                        f"{settings.min_tau_multiple:g}", refresh=True)
+                                        f"{own.min_tau_multiple:g}", refresh=True)
                     if long_enough and it > check:
                         # tau one block earlier, recomputed (not remembered) so that a resumed
                         # run takes exactly the decisions of an uninterrupted one
                         tau_prev = estimate_tau(chain[: (it - check) // k], phase_cols) * k
-                        if np.all(np.abs(tau - tau_prev) <= settings.tau_rtol * tau):
+                        if np.all(np.abs(tau - tau_prev) <= own.tau_rtol * tau):
                             converged = True
-                            reason = f"chain {it} steps >= {settings.min_tau_multiple:g} x max tau {tau.max():.0f}"
+                            reason = f"chain {it} steps >= {own.min_tau_multiple:g} x max tau {tau.max():.0f}"
                             break
                 if (max_steps is not None and it >= max_steps) or out_of_time:
                     ratio = it / tau.max()
                     what = (f"time budget of {budget:g} s" if out_of_time else f"budget of {max_steps} steps")
                     reason = (f"NOT CONVERGED: {what} ended at {ratio:.1f} x max tau ({tau.max():.0f} steps; "
-                              f"need {settings.min_tau_multiple:g})")
-                    if ratio >= settings.min_tau_multiple:
-                        reason += f"; tau still changing by more than {settings.tau_rtol:.0%} per block"
+                              f"need {own.min_tau_multiple:g})")
+                    if ratio >= own.min_tau_multiple:
+                        reason += f"; tau still changing by more than {own.tau_rtol:.0%} per block"
                     elif ratio < 20:
                         reason += "; tau is a lower bound (its estimate is capped by the chain length)"
                     break
@@ -228,8 +233,8 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
     finally:
         bar.close()
     chain = sampler.get_chain()
-    burn = min(int(np.ceil(settings.burn_tau * tau.max())), it // 2)
-    thin = max(k, int(settings.thin_tau * tau.min()) // k * k)
+    burn = min(int(np.ceil(own.burn_tau * tau.max())), it // 2)
+    thin = max(k, int(own.thin_tau * tau.min()) // k * k)
     return SamplerRun(chain=chain, log_prob=sampler.get_log_prob(), tau=tau, burn=burn, thin=thin,
                       acceptance=np.asarray(sampler.acceptance_fraction, float), converged=converged,
                       reason=reason, seconds=time.perf_counter() - t0, resumed_at=resumed_at * k,

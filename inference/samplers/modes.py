@@ -8,115 +8,25 @@ differ in several coordinates at once (measured: the alpha-beta line placed 1.4 
 together). Single-coordinate redraws and differential-evolution moves never make
 that joint step, so a mode the tempering did not populate early stays empty and
 the posterior misses it (SBC: the truth lands in modes holding no particle).
-An independence Metropolis-Hastings step from a mixture q over the known modes,
+An independence Metropolis-Hastings step from a mixture q over the known modes (the
+toolbox's one Laplace approximation + Student-t mixture,
+:func:`.toolbox.laplace_at` and :class:`.toolbox.StudentMixture`),
 accepted with ratio pi(x') q(x) / (pi(x) q(x')), moves particles between modes
 and gives each mode its posterior mass whatever q's weights are; q only has to
 cover the modes.
 
 Phases: a component is a Student-t on the wrapped difference to its centre,
-truncated to [-pi, pi) in every phase coordinate (draws outside are redrawn), so
-its density on the circle is exact: the t density of the wrapped difference over
-the component's truncation mass (estimated once by Monte Carlo).
+truncated to [-pi, pi) in every phase coordinate (:class:`.toolbox.StudentMixture`).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
-from scipy import special
 
 from ...generator.model import wrap_phase
-from .toolbox import curvature_scales, hessian
+from .toolbox import INFLATE, StudentMixture, cap_cov, laplace_at
 
-DOF = 5.0  # Student-t degrees of freedom of a component (heavy tails cover a mode's skew)
-INFLATE = 1.5  # component scale over the Laplace scale
 MAX_MODES = 16
 SAME_MODE = 0.02  # optima closer than this (max |difference| / prior width) are one mode
-
-
-def laplace_cov(hess: np.ndarray, scale: np.ndarray, max_sd: np.ndarray) -> np.ndarray:
-    """Covariance from a log-likelihood Hessian: -H^-1 with curvatures floored so that no
-    direction is wider than ``max_sd`` (dim,) (flat or non-concave directions get the
-    cap), computed in coordinates scaled by ``scale`` for conditioning."""
-    s = np.asarray(scale, float)
-    hs = -hess * s[:, None] * s[None, :]
-    hs = 0.5 * (hs + hs.T)
-    lam, vec = np.linalg.eigh(np.where(np.isfinite(hs), hs, 0.0))
-    floor = 1.0 / np.max(max_sd / s) ** 2
-    lam = np.maximum(lam, floor)
-    return cap_cov((vec / lam) @ vec.T * s[:, None] * s[None, :], max_sd)
-
-
-def cap_cov(cov: np.ndarray, max_sd: np.ndarray) -> np.ndarray:
-    """cov with every coordinate's sd shrunk to at most max_sd (correlations kept)."""
-    sd = np.sqrt(np.diag(cov))
-    c = np.minimum(1.0, max_sd / sd)
-    return cov * c[:, None] * c[None, :]
-
-
-@dataclass
-class ModeMixture:
-    """Equal-weight mixture of truncated multivariate Student-t components.
-
-    means (K, dim); chols (K, dim, dim) lower Cholesky factors of the scale matrices;
-    phase_cols: coordinates on the circle; log_mass (K,): log of each component's
-    probability of a draw inside [-pi, pi) in every phase coordinate."""
-
-    means: np.ndarray
-    chols: np.ndarray
-    phase_cols: np.ndarray
-    log_mass: np.ndarray
-    _inv: np.ndarray | None = None  # inverse Cholesky factors and log normalisers, made on first use
-    _const: np.ndarray | None = None
-
-    @classmethod
-    def build(cls, means, covs, phase_cols, rng: np.random.Generator, n_mc: int = 4000) -> "ModeMixture":
-        means = np.atleast_2d(np.asarray(means, float))
-        chols = np.array([np.linalg.cholesky(c + 1e-12 * np.diag(np.diag(c))) for c in covs])
-        mix = cls(means, chols, np.asarray(phase_cols, int), np.zeros(len(means)))
-        mass = [np.mean(mix._inside(mix._t_draws(k, n_mc, rng))) for k in range(len(means))]
-        mix.log_mass = np.log(np.maximum(mass, 1.0 / n_mc))
-        mix._inv = None
-        return mix
-
-    def _t_draws(self, k: int, n: int, rng) -> np.ndarray:
-        d = self.means.shape[1]
-        z = rng.standard_normal((n, d)) * np.sqrt(DOF / rng.chisquare(DOF, size=(n, 1)))
-        return z @ self.chols[k].T
-
-    def _inside(self, y: np.ndarray) -> np.ndarray:
-        p = self.phase_cols
-        return np.all((y[:, p] >= -np.pi) & (y[:, p] < np.pi), axis=1) if p.size else np.ones(len(y), bool)
-
-    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
-        """n draws (n, dim), phases wrapped."""
-        comp = rng.integers(len(self.means), size=n)
-        out = np.empty((n, self.means.shape[1]))
-        for k in np.unique(comp):
-            idx = np.flatnonzero(comp == k)
-            got = np.empty((0, out.shape[1]))
-            while len(got) < idx.size:
-                y = self._t_draws(k, 2 * idx.size, rng)
-                got = np.concatenate([got, y[self._inside(y)]])
-            out[idx] = self.means[k] + got[: idx.size]
-        if self.phase_cols.size:
-            out[:, self.phase_cols] = wrap_phase(out[:, self.phase_cols])
-        return out
-
-    def logpdf(self, theta: np.ndarray) -> np.ndarray:
-        """Log density (n,) of the mixture at theta (n, dim)."""
-        theta = np.atleast_2d(theta)
-        d = theta.shape[1]
-        if self._inv is None:
-            self._inv = np.linalg.inv(self.chols)
-            self._const = (special.gammaln((DOF + d) / 2) - special.gammaln(DOF / 2) - 0.5 * d * np.log(DOF * np.pi)
-                           - np.log(np.diagonal(self.chols, axis1=1, axis2=2)).sum(axis=1) - self.log_mass)
-        y = theta[None] - self.means[:, None]  # (K, n, d)
-        if self.phase_cols.size:
-            y[..., self.phase_cols] = wrap_phase(y[..., self.phase_cols])
-        sol = np.einsum("kij,knj->kni", self._inv, y)
-        logs = self._const[:, None] - 0.5 * (DOF + d) * np.log1p(np.sum(sol * sol, axis=2) / DOF)
-        return special.logsumexp(logs, axis=0) - np.log(len(self.means))
 
 
 def merge_modes(thetas: np.ndarray, values: np.ndarray, width: np.ndarray, phase_cols,
@@ -221,10 +131,9 @@ class ModeFinder:
             if len(known):
                 covs.append(self.covs[known[0]])
                 continue
-            scale = curvature_scales(lay, mu, self.post)
-            hess = hessian(self.post.log_likelihood, mu, 0.5 * scale)
-            evals += 2 * lay.dim**2 + 1 + 2 * lay.dim + 1
-            covs.append(laplace_cov(hess, scale, self.max_sd))
+            cov, n = laplace_at(self.post, lay, mu, log_f=self.post.log_likelihood, max_sd=self.max_sd)
+            evals += n
+            covs.append(cov)
         self.means, self.values, self.covs = modes, vals, np.array(covs)
         return evals
 
@@ -243,8 +152,9 @@ class ModeFinder:
             evals += n + self.add(optima)
         return evals
 
-    def mixture(self, beta: float, rng: np.random.Generator) -> ModeMixture | None:
+    def mixture(self, beta: float, rng: np.random.Generator) -> StudentMixture | None:
+        """The equal-weight mixture over the known modes at tempering level beta."""
         if not len(self.means):
             return None
         covs = [cap_cov(c * INFLATE**2 / max(beta, 1e-12), self.max_sd) for c in self.covs]
-        return ModeMixture.build(self.means, covs, self.post.layout.phase_cols, rng)
+        return StudentMixture.build(self.means, covs, self.post.layout.phase_cols, rng)

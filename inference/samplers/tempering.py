@@ -1,5 +1,6 @@
-"""Tempered sequential Monte Carlo (SMC) from the prior: an opt-in sampler for
-multimodal posteriors (``CalibrationSettings(sampler="smc")``).
+"""Tempered sequential Monte Carlo (SMC) from the prior, the algorithm of the ``smc``
+plugin (:mod:`.smc`: its knobs and its run), an opt-in sampler for multimodal
+posteriors (``CalibrationSettings(sampler="smc")``).
 
 Why SMC and not parallel tempering: the emcee ensemble starts at the fit's modes
 and its walkers stay in them (tau capped by the chain length, SBC far from
@@ -52,7 +53,7 @@ import numpy as np
 
 from ...radar.seeds import rng as seeded_rng
 from ...generator.model import wrap_phase
-from .base import CalibrationInterrupted, SamplerRun, stop_on_sigint
+from .base import CalibrationInterrupted, stop_on_sigint
 from .toolbox import systematic_resample
 
 GAMMA_MIX = ((0.25, 0.5), (1.0, 0.4), (None, 0.1))  # (factor of 2.38/sqrt(2 dim) or None = 1.0, weight)
@@ -112,7 +113,7 @@ def de_sweep(theta, ll, lprior, beta, target, rng, phase_cols=(), bounds=None, p
     (lo, hi) arrays (dim,)) instead one random coordinate redrawn uniformly on
     [lo, hi] (symmetric: the uniform density does not depend on the current value),
     which lets a particle jump straight to a distant narrow mode of that coordinate.
-    With probability ``p_jump`` (needs ``mixture``, a :class:`.modes.ModeMixture`)
+    With probability ``p_jump`` (needs ``mixture``, a :class:`.toolbox.StudentMixture`)
     instead an independence proposal from the mixture over known modes, accepted
     with the ratio that includes q(old) / q(new). With probability ``p_relabel``
     (needs ``relabel``: (theta (k, dim), rng) -> (theta', log |Jacobian|), a random
@@ -312,59 +313,3 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
                      acceptance=np.array(acc_h), sweeps=np.array(sw_h, int), converged=converged, reason=reason,
                      seconds=time.perf_counter() - t0, resumed_at=resumed_at, n_evals=n_evals,
                      log_prior=lprior, n_modes=0 if modes is None else len(modes.state().get("means", ())))
-
-
-def posterior_target(post):
-    """(log prior, log likelihood) of a :class:`..likelihood.fitted_phases.LogPosterior` for a batch theta (n, dim)."""
-
-    def target(theta):
-        lp = post.layout.log_prior(theta)
-        out = post(theta)
-        ll = np.where(np.isfinite(lp), out - np.where(np.isfinite(lp), lp, 0.0), -np.inf)
-        return lp, ll
-
-    return target
-
-
-class SMCSampler:
-    """The tempered-SMC plugin of :mod:`mdaug.inference.samplers` (see the module docstring)."""
-
-    name = "smc"
-
-    def run(self, post, fit, settings, seed_seq, *, backend_path=None, fingerprint: str = "") -> SamplerRun:
-        layout = post.layout
-        n = settings.n_particles or max(500, 40 * layout.dim)
-        n += n % 2
-        bounds = layout.theta_bounds()
-        modes = None
-        if settings.smc_jump > 0:
-            from .modes import ModeFinder
-
-            seeds = None if fit is None else post.theta_from_fit(fit.starts_z)
-            modes = ModeFinder(post, n_polish=settings.smc_polish, seed_thetas=seeds)
-        tail = None if layout.marginal else (settings.sigma_min, settings.sigma_max)
-        smc = run_smc(posterior_target(post), lambda k, rng: layout.sample_prior(k, rng, tail), n, seed_seq,
-                      ess_target=settings.smc_ess, p_move=settings.smc_p_move, max_sweeps=settings.smc_max_sweeps,
-                      max_stages=settings.smc_max_stages, phase_cols=layout.phase_cols, bounds=bounds,
-                      p_redraw=settings.smc_redraw, modes=modes, p_jump=settings.smc_jump,
-                      relabel=layout.random_relabel if layout.labelled else None, p_relabel=settings.relabel, backend_path=backend_path,
-                      fp=fingerprint, progress=settings.progress, time_budget=settings.time_budget)
-        ess = float(smc.ess[-1]) if smc.ess.size else float(n)
-        acc = float(smc.acceptance[-1]) if smc.acceptance.size else 1.0
-        # the N particles as one stored step; tau = N / ESS (ESS: the weight ESS of the last
-        # reweighting: the particles are equally weighted afterwards but share ancestors)
-        return SamplerRun(chain=smc.particles[None], log_prob=(smc.log_lik + smc.log_prior)[None],
-                          tau=np.full(layout.dim, n / ess), burn=0, thin=1, acceptance=np.full(n, acc),
-                          converged=smc.converged, reason=smc.reason, seconds=smc.seconds,
-                          resumed_at=smc.resumed_at, store_every=1, sampler="smc", extra=smc_diagnostics(smc))
-
-
-def smc_diagnostics(smc: SMCResult) -> dict:
-    """Plain-number summary of an SMC run for the result's diagnostics."""
-    uniq = len(np.unique(np.round(smc.particles, 12), axis=0)) / len(smc.particles)
-    return {"sampler": "smc", "smc_stages": int(len(smc.betas) - 1), "smc_log_z": float(smc.log_z),
-            "smc_n_particles": int(len(smc.particles)), "smc_n_evals": int(smc.n_evals),
-            "smc_modes": int(smc.n_modes),
-            "smc_unique_share": float(uniq), "smc_betas": smc.betas.tolist(),
-            "smc_acceptance": smc.acceptance.tolist(), "smc_sweeps": smc.sweeps.tolist(),
-            "smc_ess": smc.ess.tolist()}

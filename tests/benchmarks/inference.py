@@ -109,7 +109,7 @@ OPTIONS = {"ramps": 32, "sbc_draws": 20, "sbc_ramps": 32, "time_budget": 3600.0,
 def scene_profiles(cls, ramps, n=5, seed=11):
     from mdaug.generator.chain import SceneConfig, simulate_campaign
 
-    return simulate_campaign(cls, 1, n, seed, scene=SceneConfig(n_ramps=ramps, specimen_spread=0.0)).profiles
+    return simulate_campaign(cls, 1, n, seed, scene=SceneConfig().with_acquisition(ramps=ramps).with_specimens(width=0.0)).profiles
 
 
 def section_likelihood(quick):

@@ -43,7 +43,7 @@ def section_cost(args):
     print(f"\n== 1. cost of one {args.cls} population: {args.drones} drones x {args.acquisitions} acquisitions, "
           f"K = {args.ramps}, sampler {args.sampler}")
     camp = simulate_campaign(args.cls, args.drones, args.drones * args.acquisitions, 11,
-                             scene=SceneConfig(n_ramps=args.ramps))
+                             scene=SceneConfig().with_acquisition(ramps=args.ramps))
     results = []
     for d in range(args.drones):
         t = time.perf_counter()

@@ -65,7 +65,7 @@ def section_chain(args) -> None:
         rngs = [np.random.default_rng(seed + 2 + i) for i in range(n_acq)]
         return lambda: render_cubes(d, slice(0, n_acq), scene, radar, rngs)
 
-    scene1 = SceneConfig(n_ramps=1)
+    scene1 = SceneConfig().with_acquisition(ramps=1)
     cube = make(scene1, 1)()[0][:, 0]  # (11, 8, 504) int16
     print(f"\n== chain: cube {cube.shape} {cube.dtype}; threads={args.threads}")
 
@@ -81,7 +81,7 @@ def section_chain(args) -> None:
             ("chain, literal order (MTI on range-angle image)", t_image),
             ("chain, fast order (MTI first, default)", t_fast)]
     batch = 16
-    k_def = SceneConfig().n_ramps
+    k_def = SceneConfig().acquisition.ramps
     for scene, what in ((scene1, "simulate raw cube, K=1"), (SceneConfig(), f"simulate raw cube, K={k_def} (default)")):
         render = make(scene, batch)
         rows.append((what, timed(render, max(1, args.n // 40), args.repeats) / batch))
@@ -95,7 +95,7 @@ def section_campaign(args) -> None:
 
     from mdaug.generator.chain import SceneConfig, simulate_campaign
 
-    k_def = SceneConfig().n_ramps
+    k_def = SceneConfig().acquisition.ramps
     times = []
     for rep in range(max(1, min(args.repeats, 3))):
         t0 = time.perf_counter()
@@ -143,7 +143,7 @@ def section_chain_path(args) -> None:
     for cls in ("HELI", "QUAD"):
         ref = load_reference(cls).to_array()
         for k, (n_lit, n_red) in sizes.items():
-            scene = SceneConfig(n_ramps=k)
+            scene = SceneConfig().with_acquisition(ramps=k)
             x_lit, x_red = np.repeat(ref[None], n_lit, axis=0), np.repeat(ref[None], n_red, axis=0)
             t_lit = _per_profile(lambda: render_through_chain(x_lit, scene, random_state=1, method="literal"), n_lit)
             t_red = _per_profile(lambda: render_through_chain(x_red, scene, random_state=1), n_red)

@@ -1,0 +1,116 @@
+"""The ``smc`` plugin of :mod:`.samplers`: tempered sequential Monte Carlo from the prior
+(the algorithm in :mod:`.tempering`, its mode jumps in :mod:`.modes`), with its knobs
+in :class:`SMCSettings`. Output: the N final particles as one stored step, tau = N /
+ESS, and the evidence among the diagnostics (:func:`smc_diagnostics`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .base import PluginSettings, SamplerRun
+from .tempering import SMCResult, run_smc
+
+
+@dataclass(frozen=True)
+class SMCSettings(PluginSettings):
+    """The SMC plugin's knobs.
+
+    ``n_particles`` (0 = auto: max(500, 40 x dim)); reweighting to an ESS of ``ess`` x N
+    per stage (0.9: slow tempering; at 0.5 the population collapsed onto a wrong mode
+    on HELI); a share ``redraw`` of the rejuvenation proposals redraws one coordinate
+    from its uniform prior range (jumps between distant narrow modes), a share ``jump``
+    are mode jumps (:mod:`.modes`; 0 switches them off) from optima found by polishing
+    ``polish`` particles at each discovery level; rejuvenation sweeps until a particle
+    has moved with probability ``p_move`` (at most ``max_sweeps`` per stage); at most
+    ``max_stages`` stages. The shared ``relabel`` share and ``time_budget`` apply too.
+    """
+
+    n_particles: int = 0
+    ess: float = 0.9
+    redraw: float = 0.3
+    p_move: float = 0.99
+    max_sweeps: int = 40
+    max_stages: int = 500
+    jump: float = 0.1
+    polish: int = 8
+
+    LEGACY = {"smc_ess": "ess", "smc_redraw": "redraw", "smc_p_move": "p_move", "smc_max_sweeps": "max_sweeps",
+              "smc_max_stages": "max_stages", "smc_jump": "jump", "smc_polish": "polish"}  # the old flat names
+
+    def __post_init__(self) -> None:
+        if not (0 <= self.jump < 1 and self.redraw + self.jump < 1 and self.polish >= 0):
+            raise ValueError(f"smc_jump must be in [0, 1) with smc_redraw + smc_jump < 1 and smc_polish >= 0, "
+                             f"got {self.jump}, {self.redraw}, {self.polish}")
+        if not (0 < self.ess < 1 and 0 < self.p_move < 1 and 0 <= self.redraw < 1):
+            raise ValueError(f"smc_ess and smc_p_move must be in (0, 1) and smc_redraw in [0, 1), got "
+                             f"{self.ess}, {self.p_move}, {self.redraw}")
+        if self.n_particles < 0 or self.n_particles == 1 or self.max_sweeps < 2 or self.max_stages < 1:
+            raise ValueError("CalibrationSettings: n_particles must be 0 (auto) or >= 2, smc_max_sweeps >= 2 "
+                             "and smc_max_stages >= 1")
+
+    @classmethod
+    def quick(cls) -> "SMCSettings":
+        """For tests and ``--quick``: 3 particles polished per mode search."""
+        return cls(polish=3)
+
+
+
+def posterior_target(post):
+    """(log prior, log likelihood) of a :class:`..likelihood.fitted_phases.LogPosterior` for a batch theta (n, dim)."""
+
+    def target(theta):
+        lp = post.layout.log_prior(theta)
+        out = post(theta)
+        ll = np.where(np.isfinite(lp), out - np.where(np.isfinite(lp), lp, 0.0), -np.inf)
+        return lp, ll
+
+    return target
+
+
+class SMCSampler:
+    """The tempered-SMC plugin of :mod:`mdaug.inference.samplers` (:mod:`.tempering`)."""
+
+    name = "smc"
+
+    def run(self, post, fit, settings, seed_seq, *, backend_path=None, fingerprint: str = "") -> SamplerRun:
+        """settings: the shared :class:`~mdaug.inference.settings.CalibrationSettings`
+        (its own knobs, :class:`SMCSettings`, at ``settings.of("smc")``)."""
+        layout = post.layout
+        own = settings.of("smc")
+        n = own.n_particles or max(500, 40 * layout.dim)
+        n += n % 2
+        bounds = layout.theta_bounds()
+        modes = None
+        if own.jump > 0:
+            from .modes import ModeFinder
+
+            seeds = None if fit is None else post.theta_from_fit(fit.starts_z)
+            modes = ModeFinder(post, n_polish=own.polish, seed_thetas=seeds)
+        tail = None if layout.marginal else (settings.sigma_min, settings.sigma_max)
+        smc = run_smc(posterior_target(post), lambda k, rng: layout.sample_prior(k, rng, tail), n, seed_seq,
+                      ess_target=own.ess, p_move=own.p_move, max_sweeps=own.max_sweeps,
+                      max_stages=own.max_stages, phase_cols=layout.phase_cols, bounds=bounds,
+                      p_redraw=own.redraw, modes=modes, p_jump=own.jump,
+                      relabel=layout.random_relabel if layout.labelled else None, p_relabel=settings.relabel, backend_path=backend_path,
+                      fp=fingerprint, progress=settings.progress, time_budget=settings.time_budget)
+        ess = float(smc.ess[-1]) if smc.ess.size else float(n)
+        acc = float(smc.acceptance[-1]) if smc.acceptance.size else 1.0
+        # the N particles as one stored step; tau = N / ESS (ESS: the weight ESS of the last
+        # reweighting: the particles are equally weighted afterwards but share ancestors)
+        return SamplerRun(chain=smc.particles[None], log_prob=(smc.log_lik + smc.log_prior)[None],
+                          tau=np.full(layout.dim, n / ess), burn=0, thin=1, acceptance=np.full(n, acc),
+                          converged=smc.converged, reason=smc.reason, seconds=smc.seconds,
+                          resumed_at=smc.resumed_at, store_every=1, sampler="smc", extra=smc_diagnostics(smc))
+
+
+def smc_diagnostics(smc: SMCResult) -> dict:
+    """Plain-number summary of an SMC run for the result's diagnostics."""
+    uniq = len(np.unique(np.round(smc.particles, 12), axis=0)) / len(smc.particles)
+    return {"sampler": "smc", "smc_stages": int(len(smc.betas) - 1), "smc_log_z": float(smc.log_z),
+            "smc_n_particles": int(len(smc.particles)), "smc_n_evals": int(smc.n_evals),
+            "smc_modes": int(smc.n_modes),
+            "smc_unique_share": float(uniq), "smc_betas": smc.betas.tolist(),
+            "smc_acceptance": smc.acceptance.tolist(), "smc_sweeps": smc.sweeps.tolist(),
+            "smc_ess": smc.ess.tolist()}
