@@ -122,6 +122,23 @@ def test_quantities_outside_the_prior_are_flagged():
     assert ok.tolist() == [True, False]
 
 
+def test_gamma_ratios_no_engine_could_reference_are_flagged():
+    """QUAD: Gamma ratios spread wider than the prior allows around any engine are outside
+    the support: flagged by vectors (not rendered at Gamma ~ 1e51) and -inf in the density."""
+    ref = load_reference("QUAD")
+    pr = Priors.from_reference(ref)
+    lf = LabelFree(4, pr, ref.to_array())
+    q = lf.quantities(ref.to_array()[None])
+    hi = pr.bounds["lnG"][1]
+    cols = [9 * e + 7 for e in range(1, 4)]
+    wide = q.copy()
+    wide[0, cols] = [-0.5, -1.0, -2.2 * hi]  # the faintest engine below every other's range
+    x, ok = lf.vectors(np.vstack([q, wide]))
+    assert ok.tolist() == [True, False]
+    lp = lf.log_prior_u(lf.to_unbounded(np.vstack([q, wide])))
+    assert np.isfinite(lp[0]) and lp[1] == -np.inf
+
+
 def test_simulation_is_seeded_and_shaped():
     spec = SimulationSpec("HELI", Acquisition.measured(4), 3)
     x1, y1 = simulate(spec, 4, 7)

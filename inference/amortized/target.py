@@ -138,8 +138,9 @@ class LabelFree:
         labelling closest to the reference's among those the prior allows (w_a < w_b,
         C_p and C_m and every amplitude and frequency inside its bounds); engines are
         put in the prior's order (w_a increasing) with Gamma_0 fixed. ``ok`` is False
-        where no labelling of some engine fits the prior: such a q lies outside the
-        prior's support (phases are 0). Gamma ratios are not bounded here."""
+        where no labelling of some engine fits the prior, or where the Gamma ratios are
+        too spread for any engine to have been the prior's reference (the support of
+        :meth:`log_prior_u`): such a q lies outside the prior's support (phases are 0)."""
         q = np.atleast_2d(np.asarray(q, float))
         n = len(q)
         out = np.zeros((n, self.E, N_PARAMS))
@@ -162,6 +163,8 @@ class LabelFree:
                 out[:, k, IDX[f"A_{col}"]] = ap[r, pick, role]
             out[:, k, IDX["w_a"]], out[:, k, IDX["w_b"]] = wp[r, pick, 0], wp[r, pick, 1]
             out[:, k, IDX["C_p"]], out[:, k, IDX["C_m"]] = cp[r, pick], cm[r, pick]
+        if self.E > 1:  # Gamma ratios no engine of the prior could have as reference: outside its support
+            ok &= self._references(lng) > 0
         order = np.argsort(out[:, :, IDX["w_a"]], axis=1, kind="stable")
         out = np.take_along_axis(out, order[..., None], 1)
         lng = np.take_along_axis(lng, order, 1)
@@ -214,11 +217,18 @@ class LabelFree:
         engine of the lowest w_a must stay inside [lo, hi]) is not applied."""
         lo, hi = self.priors.bounds["lnG"]
         full = np.concatenate([np.zeros((len(r), 1)), r], axis=1)  # (n, E), decreasing
-        count = ((full[:, :1] - full <= hi) & (full[:, -1:] - full >= lo)).sum(axis=1)
+        count = self._references(full)
         steps = -np.diff(full, axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
             return (np.log(count) + np.sum(np.log(np.arange(1, self.E))) - (self.E - 1) * np.log(hi - lo)
                     + np.log(steps).sum(axis=1))
+
+    def _references(self, lng: np.ndarray) -> np.ndarray:
+        """How many engines of each row of ln Gamma values (n, E) could be the prior's
+        reference engine: every other engine's ratio to it inside the prior's lnG range
+        (0: outside the prior's support)."""
+        lo, hi = self.priors.bounds["lnG"]
+        return ((lng.max(axis=1, keepdims=True) - lng <= hi) & (lng.min(axis=1, keepdims=True) - lng >= lo)).sum(1)
 
     def aligned(self, x: np.ndarray) -> np.ndarray:
         """Vectors relabelled to the reference's labelling (:func:`align_lines`)."""
