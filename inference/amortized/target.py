@@ -15,10 +15,10 @@ Why brightness: the prior draws each Gamma ratio over two decades either side, s
 typical several-engine drone one engine dominates the profile and the faint ones are
 barely seen. Ordered by brightness, "engine 0" is the one the measurements identify;
 ordered by lowest line (the first version of this target, ``TARGET`` 1) it is most
-often a faint engine, and a network learns nothing about it (measured on 20,000
-simulated QUADs at K = 32: a direct regression from the mean log-profile explains
-R^2 0.34-0.72 of the brightest engine's log line frequencies, about 0 of the
-lowest-line engine's).
+often a faint engine, and a network learns little about any engine (on 20,000
+simulated QUADs at K = 32, a direct regression from the mean log-profile explains
+R^2 0.34-0.72 of the brightest engine's log line frequencies and -0.09 to 0.17 of
+every quantity in the lowest-line order: ``tests/benchmarks/identifiability.py``).
 
 :class:`DroneSpace` is the drone's block of a one-measurement marginal layout: prior
 draws, the exact prior density with its ordering constraints, the line-relabelling
