@@ -171,6 +171,38 @@ def test_population_sbc_runs_and_resumes(tmp_path):
     assert len(ck.read_text().splitlines()) == 2
 
 
+def test_population_sbc_counts_a_refused_population(tmp_path, monkeypatch):
+    """A population with a drone the calibration refuses (its posterior nearly all
+    outside the prior) is counted and left out of the ranks, not a crash; when every
+    population is refused the SBC says so by name."""
+    import mdaug.inference.amortized.calibrate as amortized_calibrate
+    from mdaug.inference.amortized.estimator import EstimatorError
+    from mdaug.inference.diagnostics.population_sbc import run_population_sbc
+
+    real = amortized_calibrate.calibrate_amortized
+    calls = []
+
+    def first_refused(*args, **kw):
+        calls.append(1)
+        if len(calls) == 1:
+            raise EstimatorError("drone 0: the amortized posterior put 3 of 40000 draws inside the prior")
+        return real(*args, **kw)
+
+    monkeypatch.setattr(amortized_calibrate, "calibrate_amortized", first_refused)
+    kw = dict(n_drones=2, n_acquisitions=3, ramps=4, seed=3, n_rank=19, workers=1)
+    out = run_population_sbc("HELI", 3, checkpoint=tmp_path / "a.jsonl", **kw)
+    assert out["refused"]["count"] == 1 and out["refused"]["of"] == 3
+    assert "3 of 40000 draws" in out["refused"]["first"]
+    assert out["all"]["ranks"].shape[0] == 2
+
+    def always_refused(*args, **kw):
+        raise EstimatorError("drone 0: unlike anything in its training set")
+
+    monkeypatch.setattr(amortized_calibrate, "calibrate_amortized", always_refused)
+    with pytest.raises(ValueError, match="every one of 2 populations had a drone the calibration refused"):
+        run_population_sbc("HELI", 2, checkpoint=tmp_path / "b.jsonl", **kw)
+
+
 def test_study_data_keeps_each_calibration_drone(tmp_path):
     """simulation.calibration_drones = 2: each drone's first n_calibration acquisitions
     are calibrated on; the choices are made on a third drone no strategy is calibrated

@@ -97,10 +97,14 @@ def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n
     camp = simulate_campaign(mean, n_drones + 1, (n_drones + 1) * n_acquisitions, data_seed, scene=scene)
     if method == "amortized":  # the shipped estimator's posterior per drone (milliseconds; no emcee route)
         from ..amortized.calibrate import calibrate_amortized
+        from ..amortized.estimator import EstimatorError
 
-        results = [calibrate_amortized(camp.profiles[camp.specimen == d], ref, acquisition=camp.acquisition,
-                                       random_state=seed_sequence(run_ss, d), emcee=False, n_draws=2000)
-                   for d in range(n_drones)]
+        try:
+            results = [calibrate_amortized(camp.profiles[camp.specimen == d], ref, acquisition=camp.acquisition,
+                                           random_state=seed_sequence(run_ss, d), emcee=False, n_draws=2000,
+                                           source=f"drone {d}") for d in range(n_drones)]
+        except EstimatorError as exc:  # the calibration refuses this drone, as it refuses a user's: counted
+            return {"i": i, "refused": str(exc), "seconds": time.perf_counter() - t0}
     else:
         results = [calibrate(camp.profiles[camp.specimen == d], ref, acquisition=camp.acquisition,
                              settings=settings, random_state=seed_sequence(run_ss, d)) for d in range(n_drones)]
@@ -122,7 +126,10 @@ def run_population_sbc(reference: ClassParams | str = "HELI", n_replicates: int 
                        checkpoint=None, workers: int = 1, progress=None, method: str = "amortized") -> dict:
     """Population SBC (module doc): :func:`.sbc.summarise` of the ranks, separately for
     the spreads (``spreads``) and the unseen drone's lines (``new_drone``), plus all
-    (``all``). Resumable (``checkpoint``, JSON lines) and spread over ``workers``."""
+    (``all``), and ``refused``: the populations with a drone the calibration refused (its
+    posterior nearly all outside the prior), counted and left out of the ranks (a
+    calibration that refuses is a failure the SBC reports, not a rank). Resumable
+    (``checkpoint``, JSON lines) and spread over ``workers``."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     ref = load_reference(reference) if isinstance(reference, str) else reference
@@ -133,10 +140,17 @@ def run_population_sbc(reference: ClassParams | str = "HELI", n_replicates: int 
     recs = run_replicates(population_replicate, (ref,),
                           (n_drones, n_acquisitions, ramps, settings, hyperprior, n_rank, method), key, n_replicates, seed,
                           checkpoint=checkpoint, workers=workers, progress=progress)
+    refused = [r for r in recs if "refused" in r]
+    recs = [r for r in recs if "refused" not in r]
+    if not recs:
+        raise ValueError(f"population SBC: every one of {len(refused)} populations had a drone the calibration "
+                         f"refused (first: {refused[0]['refused']})")
     out = {"all": summarise(recs, n_rank, n_bins)}
     for part, prefix in (("spreads", "spread:"), ("new_drone", "new:")):
         cols = [j for j, n in enumerate(recs[0]["names"]) if n.startswith(prefix)]
         sub = [{**r, "ranks": [r["ranks"][j] for j in cols], "names": [r["names"][j] for j in cols]} for r in recs]
         out[part] = summarise(sub, n_rank, n_bins)
     out["settings"] = settings.to_dict()
+    out["refused"] = {"count": len(refused), "of": len(refused) + len(recs),
+                      "first": refused[0]["refused"] if refused else ""}
     return out

@@ -78,7 +78,10 @@ def section_sbc(args):
               f"min p {s['min_p']:.3f}  [{verdict}] over {s['n_replicates']} populations")
         worst = sorted(s["outer_share_by_quantity"].items(), key=lambda kv: -abs(kv[1] - 0.1))[:4]
         print("           furthest from 0.10: " + ", ".join(f"{k} {v:.2f}" for k, v in worst))
-    a = out["all"]
+    a, r = out["all"], out["refused"]
+    if r["count"]:
+        print(f"refused: {r['count']} of {r['of']} populations had a drone the calibration refused, left out of "
+              f"the ranks above (first: {r['first']})")
     print(f"converged share {a['converged_share']:.2f}; seconds per population: median "
           f"{np.median(a['seconds']):.0f}")
 
