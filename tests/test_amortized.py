@@ -58,19 +58,21 @@ def test_label_free_round_trip_keeps_every_line(cls):
     assert np.all(np.diff(w, axis=1) > 0)
 
 
-def test_label_free_prior_density_is_normalised():
+@pytest.mark.parametrize("cls, engines, n_is", [("HELI", 1, 200000), ("QUAD", 2, 300000)])
+def test_label_free_prior_density_is_normalised(cls, engines, n_is):
     """The closed-form prior density in u integrates to one: importance sampling from a
-    Gaussian fitted to prior draws (HELI: exact, one engine)."""
+    Gaussian fitted to prior draws. HELI: one engine; two engines of the QUAD prior: with
+    the Gamma-ratio part for the brightness order (the re-referencing cut never acts on two)."""
     from scipy.stats import multivariate_normal
 
-    ref = load_reference("HELI")
+    ref = load_reference(cls)
     pr = Priors.from_reference(ref)
-    space, lf = DroneSpace(1, pr), LabelFree(1, pr, ref.to_array())
+    space, lf = DroneSpace(engines, pr), LabelFree(engines, pr, ref.to_array())
     rng = np.random.default_rng(0)
     u = lf.to_unbounded(lf.quantities(space.vectors(space.sample_prior(20000, rng))))
     assert np.all(np.isfinite(lf.log_prior_u(u)))
     mu, cov = u.mean(0), 1.5 * np.cov(u.T)
-    z = rng.multivariate_normal(mu, cov, 200000)
+    z = rng.multivariate_normal(mu, cov, n_is)
     w = np.exp(lf.log_prior_u(z) - multivariate_normal(mu, cov).logpdf(z))
     assert abs(w.mean() - 1.0) < 4 * w.std() / np.sqrt(len(w)) + 0.02
 
@@ -86,29 +88,12 @@ def test_engines_are_ordered_by_brightness():
     x = space.vectors(space.sample_prior(200, np.random.default_rng(1))).reshape(200, 4, 13)
     q = lf.quantities(x.reshape(200, -1))
     np.testing.assert_allclose(lf.quantities(x[:, [2, 0, 3, 1]].reshape(200, -1)), q, rtol=1e-12)
-    lng = q[:, [9 * e + 7 for e in range(1, 4)]]
-    assert [lf.names[9 * e + 7] for e in range(1, 4)] == ["lnG[1]", "lnG[2]", "lnG[3]"]
+    lng = q[:, lf.gamma_columns]
+    assert [lf.names[c] for c in lf.gamma_columns] == ["lnG[1]", "lnG[2]", "lnG[3]"]
     assert np.all(lng <= 0) and np.all(np.diff(lng, axis=1) <= 0)
     brightest = np.argmax(x[..., IDX["Gamma"]], axis=1)
     w_bright, _, _ = engine_lines(x[np.arange(200), brightest][:, None])
     np.testing.assert_allclose(q[:, :4], np.sort(w_bright[:, 0], axis=1), rtol=1e-12)
-
-
-def test_two_engine_prior_density_is_normalised():
-    """Two engines (the QUAD prior's): the closed-form density in u, with its Gamma-ratio
-    part for the brightness order, integrates to one (importance sampling)."""
-    from scipy.stats import multivariate_normal
-
-    ref = load_reference("QUAD")
-    pr = Priors.from_reference(ref)
-    space, lf = DroneSpace(2, pr), LabelFree(2, pr, ref.to_array())
-    rng = np.random.default_rng(0)
-    u = lf.to_unbounded(lf.quantities(space.vectors(space.sample_prior(20000, rng))))
-    assert np.all(np.isfinite(lf.log_prior_u(u)))
-    mu, cov = u.mean(0), 1.5 * np.cov(u.T)
-    z = rng.multivariate_normal(mu, cov, 300000)
-    w = np.exp(lf.log_prior_u(z) - multivariate_normal(mu, cov).logpdf(z))
-    assert abs(w.mean() - 1.0) < 4 * w.std() / np.sqrt(len(w)) + 0.02
 
 
 def test_quantities_outside_the_prior_are_flagged():
@@ -130,7 +115,7 @@ def test_gamma_ratios_no_engine_could_reference_are_flagged():
     lf = LabelFree(4, pr, ref.to_array())
     q = lf.quantities(ref.to_array()[None])
     hi = pr.bounds["lnG"][1]
-    cols = [9 * e + 7 for e in range(1, 4)]
+    cols = lf.gamma_columns
     wide = q.copy()
     wide[0, cols] = [-0.5, -1.0, -2.2 * hi]  # the faintest engine below every other's range
     x, ok = lf.vectors(np.vstack([q, wide]))

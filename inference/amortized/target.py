@@ -61,6 +61,11 @@ class LabelFree:
         return out
 
     @property
+    def gamma_columns(self) -> list[int]:
+        """Columns of q (and u) holding lnG[1..E-1], the ratios to the brightest engine."""
+        return [9 * e + 7 for e in range(1, self.E)]
+
+    @property
     def kinds(self) -> list[str]:
         """'w' (rad/s), 'A' (m) or 'lnG' per quantity."""
         return [n.split()[-1][0] if n.startswith("line") else "lnG" for n in self.names]
@@ -203,7 +208,7 @@ class LabelFree:
             if k:
                 j += 1
         if self.E > 1:
-            out += self._log_gamma_density(q[:, [9 * e + 7 for e in range(1, self.E)]])  # the lnG columns
+            out += self._log_gamma_density(q[:, self.gamma_columns])
         out[~np.isfinite(out)] = -np.inf
         return out
 
