@@ -1,0 +1,123 @@
+"""How sharp must a calibration be for its synthetic training set to classify new drones?
+
+python tests/benchmarks/calibration_gap.py STUDY_DIR [--n 1000] [--shrink 1,0.5,0.3] [--models xgb,svm]
+
+STUDY_DIR: a finished simulated study (``mdaug run --out STUDY_DIR``). Its drones are
+drawn around the packaged class references, so the reference is what a perfect
+calibration of its calibration drone would find, up to the specimen spread. For each
+source of class vectors, a training set of N profiles per class is rendered through
+the scene and the chain under each class's measured acquisition, the fast classifiers
+are trained on it and scored (balanced accuracy, per-class recall) on the study's
+'select' and 'new_large' sets:
+
+* ``reference``: the class reference drone only (what the whole method can reach);
+* ``posterior``: the study's posterior draws (what the study's ``posterior`` did);
+* ``posterior at the reference, x s``: the posterior's spread in the label-free
+  coordinates u, scaled by s and moved onto the reference (an honest posterior of the
+  same width, s = 1, or s times as sharp, centred on the truth).
+
+The gap between the rows says whether the calibration loses the class by its centre or
+by its width. 1 thread.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+import numpy as np  # noqa: E402
+
+CLASSES = ("HELI", "QUAD")
+
+
+def label_free(ref):
+    from mdaug.inference.amortized.target import LabelFree
+    from mdaug.inference.space.priors import Priors
+    from mdaug.radar import RadarConfig
+
+    return LabelFree(ref.n_engines, Priors.from_reference(ref, RadarConfig()), ref.to_array())
+
+
+def vector_sources(study: str, shrinks) -> dict:
+    """{row name: {class: vectors (n, 13E)}}."""
+    from mdaug.generator import load_reference
+    from mdaug.inference.result.augment import load_posterior
+
+    rows = {"reference": {}, "posterior": {}}
+    rows.update({f"posterior at the reference, x {s:g}": {} for s in shrinks})
+    for cls in CLASSES:
+        ref = load_reference(cls)
+        lf = label_free(ref)
+        post = load_posterior(os.path.join(study, "posteriors", f"{cls}.nc"), cls)
+        x = np.concatenate([post.draws(measurement=m) for m in range(post.n_measurements)])
+        rows["reference"][cls] = ref.to_array()[None]
+        rows["posterior"][cls] = x
+        u = lf.to_unbounded(lf.quantities(x))
+        u = u[np.all(np.isfinite(u), axis=1)]
+        u_ref = lf.to_unbounded(lf.quantities(ref.to_array()[None]))[0]
+        for s in shrinks:
+            moved, ok = lf.vectors(lf.from_unbounded(u_ref + s * (u - np.median(u, axis=0))))
+            rows[f"posterior at the reference, x {s:g}"][cls] = moved[ok]
+    return rows
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("study")
+    p.add_argument("--n", type=int, default=1000, help="training profiles per class")
+    p.add_argument("--shrink", default="1,0.5,0.3")
+    p.add_argument("--models", default="xgb,svm")
+    p.add_argument("--seed", type=int, default=0)
+    a = p.parse_args(argv)
+
+    from sklearn.metrics import balanced_accuracy_score, recall_score
+
+    from mdaug.classify.models import make_classifier
+    from mdaug.generator import make_dataset
+    from mdaug.generator.acquisition import Acquisition
+    from mdaug.generator.augment import ModelAugmenter, Renderer, VectorSource
+
+    results = json.load(open(os.path.join(a.study, "results.json")))
+    if not results.get("simulated"):
+        raise SystemExit(f"{a.study}: results.json field 'simulated' is not true; this benchmark needs a simulated "
+                         "study (its drones are drawn around the class references)")
+
+    class Pool(VectorSource):
+        def __init__(self, x, label):
+            self.x, self.label, self.n_engines = x, label, x.shape[1] // 13
+
+        def draw(self, n, rng):
+            return self.x[rng.integers(len(self.x), size=n)]
+
+    tests = {name: np.load(os.path.join(a.study, "data", f"{name}.npz"), allow_pickle=False)
+             for name in ("select", "new_large")}
+    acq = {}
+    for cls in CLASSES:
+        with np.load(os.path.join(a.study, "data", f"calibration_{cls}.npz"), allow_pickle=False) as z:
+            acq[cls] = Acquisition.from_dict(json.loads(str(z["acquisition"])))
+    shrinks = [float(s) for s in a.shrink.split(",")]
+    print(f"{a.study}: {a.n} training profiles per class through the scene and the chain; balanced accuracy "
+          "[recall HELI, QUAD]")
+    print(f"{'source of class vectors':36s} {'model':5s} {'select':>20s} {'new_large':>20s}")
+    for row, per_class in vector_sources(a.study, shrinks).items():
+        augs = [ModelAugmenter(Pool(per_class[c], c), Renderer(acq[c], "peak", through_chain=True))
+                for c in CLASSES]
+        ds = make_dataset(augs, a.n, a.seed, progress=False)
+        labels = np.asarray(ds.labels)
+        y = np.asarray(CLASSES)[labels] if np.issubdtype(labels.dtype, np.integer) else labels
+        for model in a.models.split(","):
+            clf = make_classifier(model, random_state=a.seed).fit(ds.profiles, y)
+            cells = []
+            for t in tests.values():
+                pred = clf.predict(t["profiles"])
+                rec = recall_score(t["labels"], pred, average=None, labels=list(CLASSES))
+                cells.append(f"{balanced_accuracy_score(t['labels'], pred):.3f} [{rec[0]:.2f} {rec[1]:.2f}]")
+            print(f"{row:36s} {model:5s} {cells[0]:>20s} {cells[1]:>20s}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
