@@ -11,8 +11,8 @@ is the one not seen. Ranks among ``n_rank`` draws of:
 
 * each spread, among the hyper-posterior's draws;
 * the unseen drone's label-free lines (:func:`.sbc.sbc_quantities`: each engine's
-  line frequencies sorted, their amplitudes, the Gamma ratios; the engines in the
-  order of their lowest line, :func:`engines_in_order`), among new drones
+  line frequencies sorted, their amplitudes, the Gamma ratios; the engines by
+  brightness, as the estimators' target orders them, :func:`engines_in_order`), among new drones
   drawn from the population (:meth:`..population.result.PopulationResult.draw_drones`).
 
 The class mean: with the amortized drones, drawn from the calibration prior the
@@ -32,11 +32,10 @@ import time
 
 import numpy as np
 
-from ...generator import N_PARAMS, ClassParams, load_reference
+from ...generator import IDX, N_PARAMS, ClassParams, load_reference
 from ...radar.seeds import seed_sequence
 from ..population.model import SPREADS, Hyperprior
 from ..settings import CalibrationSettings
-from ..space.priors import engine_lines
 from .sbc import run_replicates, sbc_quantities, summarise
 
 METHODS = ("amortized", "likelihood")
@@ -44,15 +43,16 @@ METHODS = ("amortized", "likelihood")
 
 
 def engines_in_order(x: np.ndarray) -> np.ndarray:
-    """Class vectors (n, 13E) with each vector's engines ordered by their lowest line
-    frequency: which engine a simulator or a population calls 0 is a label, and the
-    ranks of a per-engine quantity compare like with like only in a label-free order
-    (any fixed function of the parameters is a valid SBC quantity)."""
+    """Class vectors (n, 13E) with each vector's engines ordered by brightness (Gamma,
+    decreasing; ties in their given order), the order of the estimators' label-free
+    target (:class:`..amortized.target.LabelFree`): which engine a simulator or a
+    population calls 0 is a label, and the ranks of a per-engine quantity compare like
+    with like only in a label-free order (any fixed function of the parameters is a
+    valid SBC quantity; this one ranks first what the profiles identify best)."""
     x = np.atleast_2d(np.asarray(x, float))
     n, e = len(x), x.shape[1] // N_PARAMS
     xe = x.reshape(n, e, N_PARAMS)
-    w, _, _ = engine_lines(xe)
-    order = np.argsort(w.min(axis=-1), axis=1)
+    order = np.argsort(-xe[..., IDX["Gamma"]], axis=1, kind="stable")
     return np.take_along_axis(xe, order[:, :, None], axis=1).reshape(n, -1)
 
 
