@@ -136,7 +136,7 @@ def run_population_sbc(reference: ClassParams | str = "HELI", n_replicates: int 
     settings = settings or CalibrationSettings(sampler="laplace")
     hyperprior = hyperprior or Hyperprior.stated()
     key = ["population", ref.name, n_replicates, n_drones, n_acquisitions, ramps, settings.to_dict(),
-           hyperprior.scales, str(seed), n_rank] + ([] if method == "likelihood" else [method])
+           hyperprior.scales, str(seed), n_rank] + ([] if method == "likelihood" else [method, "engines by brightness"])
     recs = run_replicates(population_replicate, (ref,),
                           (n_drones, n_acquisitions, ramps, settings, hyperprior, n_rank, method), key, n_replicates, seed,
                           checkpoint=checkpoint, workers=workers, progress=progress)
