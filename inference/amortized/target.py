@@ -37,6 +37,12 @@ _EPS = 1e-9
 TARGET = 2  # the definition of q (module doc); stored in every estimator file
 
 
+def brightness_order(xe: np.ndarray) -> np.ndarray:
+    """Engine indices (n, E) of per-engine vectors xe (n, E, 13) ordered by brightness
+    (Gamma decreasing, ties in their given order): the engine order of this target."""
+    return np.argsort(-xe[..., IDX["Gamma"]], axis=1, kind="stable")
+
+
 class LabelFree:
     """Label-free quantities of one class's drones (module doc).
 
@@ -79,7 +85,7 @@ class LabelFree:
         w, a, _ = engine_lines(xe)
         order = np.argsort(w, axis=-1)
         w, a = np.take_along_axis(w, order, -1), np.take_along_axis(a, order, -1)
-        eng = np.argsort(-xe[..., IDX["Gamma"]], axis=1, kind="stable")  # engines by brightness
+        eng = brightness_order(xe)
         w, a = np.take_along_axis(w, eng[..., None], 1), np.take_along_axis(a, eng[..., None], 1)
         lng = np.log(np.take_along_axis(xe[..., IDX["Gamma"]], eng, 1))
         cols = []

@@ -32,8 +32,9 @@ import time
 
 import numpy as np
 
-from ...generator import IDX, N_PARAMS, ClassParams, load_reference
+from ...generator import N_PARAMS, ClassParams, load_reference
 from ...radar.seeds import seed_sequence
+from ..amortized.target import brightness_order
 from ..population.model import SPREADS, Hyperprior
 from ..settings import CalibrationSettings
 from .sbc import run_replicates, sbc_quantities, summarise
@@ -52,7 +53,7 @@ def engines_in_order(x: np.ndarray) -> np.ndarray:
     x = np.atleast_2d(np.asarray(x, float))
     n, e = len(x), x.shape[1] // N_PARAMS
     xe = x.reshape(n, e, N_PARAMS)
-    order = np.argsort(-xe[..., IDX["Gamma"]], axis=1, kind="stable")
+    order = brightness_order(xe)
     return np.take_along_axis(xe, order[:, :, None], axis=1).reshape(n, -1)
 
 
