@@ -11,7 +11,8 @@ are trained on it and scored (balanced accuracy, per-class recall) on the study'
 'select' and 'new_large' sets:
 
 * ``reference``: the class reference drone only (what the whole method can reach);
-* ``posterior``: the study's posterior draws (what the study's ``posterior`` did);
+* ``posterior``: the study's posterior draws (the ``posterior`` strategy's source, without
+  its smoothing jitter);
 * ``posterior at the reference, x s``: the posterior's spread in the label-free
   coordinates u, scaled by s and moved onto the reference (an honest posterior of the
   same width, s = 1, or s times as sharp, centred on the truth).
@@ -78,19 +79,12 @@ def main(argv=None) -> int:
     from mdaug.classify.models import make_classifier
     from mdaug.generator import make_dataset
     from mdaug.generator.acquisition import Acquisition
-    from mdaug.generator.augment import ModelAugmenter, Renderer, VectorSource
+    from mdaug.generator.augment import FixedSource, ModelAugmenter, Renderer
 
     results = json.load(open(os.path.join(a.study, "results.json")))
     if not results.get("simulated"):
         raise SystemExit(f"{a.study}: results.json field 'simulated' is not true; this benchmark needs a simulated "
                          "study (its drones are drawn around the class references)")
-
-    class Pool(VectorSource):
-        def __init__(self, x, label):
-            self.x, self.label, self.n_engines = x, label, x.shape[1] // 13
-
-        def draw(self, n, rng):
-            return self.x[rng.integers(len(self.x), size=n)]
 
     tests = {name: np.load(os.path.join(a.study, "data", f"{name}.npz"), allow_pickle=False)
              for name in ("select", "new_large")}
@@ -102,9 +96,10 @@ def main(argv=None) -> int:
     print(f"{a.study}: {a.n} training profiles per class through the scene and the chain; balanced accuracy "
           "[recall HELI, QUAD]")
     print(f"{'source of class vectors':36s} {'model':5s} {'select':>20s} {'new_large':>20s}")
-    for row, per_class in vector_sources(a.study, shrinks).items():
-        augs = [ModelAugmenter(Pool(per_class[c], c), Renderer(acq[c], "peak", through_chain=True))
-                for c in CLASSES]
+    shuffle = np.random.default_rng(a.seed)
+    for row, per_class in vector_sources(a.study, shrinks).items():  # each pool in random order, cycled
+        augs = [ModelAugmenter(FixedSource(shuffle.permutation(per_class[c]), c),
+                               Renderer(acq[c], "peak", through_chain=True)) for c in CLASSES]
         ds = make_dataset(augs, a.n, a.seed, progress=False)
         labels = np.asarray(ds.labels)
         y = np.asarray(CLASSES)[labels] if np.issubdtype(labels.dtype, np.integer) else labels
