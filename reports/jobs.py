@@ -115,6 +115,17 @@ def calibrate_class(job: dict) -> dict:
             "seconds": time.perf_counter() - t0}
 
 
+@announced(lambda job: f"data: {job['cls']} {job['part']}")
+def campaign(job: dict) -> tuple:
+    """One simulated campaign of the study's data (``cls``, ``n_specimens``, ``n``
+    acquisitions, ``scene``, ``seed``): (profiles, labels, specimen)."""
+    from ..generator.chain import simulate_campaign
+
+    _threads(job.get("threads", 1))
+    camp = simulate_campaign(job["cls"], job["n_specimens"], job["n"], job["seed"], scene=job["scene"])
+    return camp.profiles, camp.labels, camp.specimen
+
+
 def _estimator_sbc(res) -> dict | None:
     """The SBC the calibration's estimator passed (stored in its file): the amortized
     route's outer share, pooled rank p and truths."""
@@ -123,20 +134,29 @@ def _estimator_sbc(res) -> dict | None:
                                  "n_replicates": sbc.get("n_replicates")}
 
 
-@announced(lambda job: f"ceiling: {job['model']} (seed {job['seed']})")
+@announced(lambda job: job.get("label") or f"{job['model']} (seed {job['seed']})")
 def fit_predict(job: dict) -> dict:
-    """Train one classifier (``model``, ``seed``, ``params``) on (``X``, ``y``) and predict
-    every set of ``tests``: {train_seconds, predictions (encoded)}."""
-    from ..classify import make_classifier
+    """Train one classifier (``model``, ``seed``, ``params``) on (``X``, ``y``; ``groups``
+    when given, the CNN's validation split by drone) and predict every set of
+    ``tests``; saved to ``model_path`` when given. Returns {train_seconds, epochs_run,
+    predictions (encoded)}."""
+    from ..classify import make_classifier, save_model
+    from ..radar.progress import echo
     from .statistics import encode
 
     _threads(job.get("threads", 1))
-    clf = make_classifier(job["model"], random_state=job["seed"], **job.get("params", {}))
+    clf = make_classifier(job["model"], random_state=job["seed"], **dict(job.get("params", {})))
+    groups = job.get("groups")
     t0 = time.perf_counter()
-    clf.fit(job["X"], job["y"])
+    clf.fit(job["X"], job["y"], **({} if groups is None else {"groups": groups}))
     seconds = time.perf_counter() - t0
-    return {"train_seconds": seconds, "predictions": {n: encode(clf.predict(np.asarray(Xt)), job["classes"])
-                                                       for n, (Xt, _) in job["tests"].items()}}
+    if job.get("model_path"):
+        save_model(clf, job["model_path"])
+    if job.get("run_label"):
+        echo(f"{job['run_label']} trained in {seconds:.1f} s")
+    return {"train_seconds": seconds, "epochs_run": (getattr(clf, "split_scores_", None) or {}).get("epochs_run"),
+            "predictions": {n: encode(clf.predict(np.asarray(Xt)), job["classes"])
+                            for n, (Xt, _) in job["tests"].items()}}
 
 
 @dataclass(frozen=True)
@@ -176,41 +196,91 @@ def candidate(job: dict) -> list[dict]:
     return run_sweep_job(sweep)
 
 
-@announced(lambda job: f"cnn_{job['name']}")
-def train_and_test(job: dict) -> dict:
-    """A strategy's training runs: make its training set once (from ``seed``), train one
-    classifier per run seed (``run_seeds``: weights, validation split and shuffles) on
-    it, predict every set given. Returns the runs' predictions (one string of class
-    indices per run and set, :func:`mdaug.reports.statistics.encode`), not their scores:
-    the study scores all runs of all classifiers on the same resamples."""
-    from ..classify import make_classifier, save_model
-    from ..radar.progress import echo
-    from .statistics import encode
-
+def stage_data(job: dict) -> dict:
+    """The training set of a training stage (:mod:`.study_training`): a strategy's CNN
+    (``kind`` "cnn": its set from ``seed``) or the separability ceiling (``kind``
+    "ceiling": the scene simulator's own drones through the chain). Returns {X, y,
+    groups, seconds}."""
     _threads(job.get("threads", 1))
     t0 = time.perf_counter()
-    X, y, groups = training_set(job["spec"], job["classes"], job["n_per_class"], job["seed"])
-    t_data = time.perf_counter() - t0
+    if job["kind"] == "cnn":
+        X, y, groups = training_set(job["spec"], job["classes"], job["n_per_class"], job["seed"])
+    else:
+        X, y, groups = _ceiling_set(job)
+    return {"X": X, "y": y, "groups": groups, "seconds": time.perf_counter() - t0}
+
+
+@announced(lambda job: f"{job['stage']}: training set")
+def stage_data_job(job: dict) -> dict:
+    """:func:`stage_data` as a worker job (it logs its start and end there)."""
+    return stage_data(job)
+
+
+def _ceiling_set(job: dict):
+    from ..generator import load_reference
+    from ..generator.chain import SceneConfig, draw_specimens, render_through_chain
+    from ..radar.seeds import child_seed
+    from ..radar.seeds import rng as seeded_rng
+
+    scene = SceneConfig().with_acquisition(ramps=job["ramps"])
+    n, parts, labels = job["per_class"], [], []
+    for c in job["classes"]:
+        rng = seeded_rng(child_seed(job["seed"], "ceiling", c))
+        specimens = draw_specimens(load_reference(c).to_array(), job["n_specimens"], scene, rng)
+        x = specimens[np.arange(n) % len(specimens)]
+        parts.append(render_through_chain(x, scene, random_state=child_seed(job["seed"], "ceiling-chain", c)).profiles)
+        labels.append(np.full(n, c))
+    return np.concatenate(parts), np.concatenate(labels), None
+
+
+def stage_fits(job: dict, data: dict) -> list[dict]:
+    """The training runs of a stage as :func:`fit_predict` jobs, each with its own seed:
+    a CNN stage's ``run_seeds`` (model saved per run), or the ceiling's ``fits``
+    ((model, seed, params) each)."""
     classes = sorted(job["classes"])
-    runs = []
+    common = {"X": data["X"], "y": data["y"], "tests": job["tests"], "classes": classes}
+    if job["kind"] == "ceiling":
+        return [{**common, "model": m, "seed": seed, "params": params, "label": f"ceiling: {m} (seed {seed})"}
+                for m, seed, params in job["fits"]]
     seeds = job.get("run_seeds") or [job["seed"]]
-    echo(f"[cnn_{job.get('name', job['model'])}] training set of {len(y)} profiles in {t_data:.1f} s; "
-         f"{len(seeds)} training run(s)")
-    for i, seed in enumerate(seeds):
-        clf = make_classifier(job["model"], random_state=seed, **dict(job.get("model_params", {})))
-        t1 = time.perf_counter()
-        clf.fit(X, y, **({} if groups is None else {"groups": groups}))
-        t_train = time.perf_counter() - t1
-        if job.get("model_path"):
-            save_model(clf, str(job["model_path"]).format(run=i))
-        runs.append({"seed": int(seed), "train_seconds": t_train,
-                     "epochs_run": (getattr(clf, "split_scores_", None) or {}).get("epochs_run"),
-                     "predictions": {name: encode(clf.predict(np.asarray(Xt)), classes)
-                                     for name, (Xt, _) in job["tests"].items()}})
-        echo(f"[cnn_{job.get('name', job['model'])}] run {i + 1}/{len(seeds)} trained in {t_train:.1f} s")
+    return [{**common, "groups": data["groups"], "model": job["model"], "seed": seed,
+             "params": job.get("model_params", {}), "label": f"{job['stage']} run {i + 1}/{len(seeds)}",
+             "run_label": f"[{job['stage']}] run {i + 1}/{len(seeds)}",
+             "model_path": str(job["model_path"]).format(run=i) if job.get("model_path") else None}
+            for i, seed in enumerate(seeds)]
+
+
+def stage_result(job: dict, data: dict, fits: list[dict], done: list[dict]) -> dict:
+    """A stage's record from its runs' results (``done``, in the order of ``fits``):
+    predictions of every run, not their scores (the study scores all runs of all
+    classifiers on the same resamples)."""
+    if job["kind"] == "ceiling":
+        result = {"n_train": int(len(data["y"])), "models": {}, "what": job["what"]}
+        for fit, res in zip(fits, done):
+            m = result["models"].setdefault(fit["model"], {"train_seconds": 0.0, "seeds": [],
+                                                           "predictions": {n: [] for n in job["tests"]}})
+            m["train_seconds"] += res["train_seconds"]
+            m["seeds"].append(fit["seed"])
+            for n in job["tests"]:
+                m["predictions"][n].append(res["predictions"][n])
+        return result
     spec = job["spec"].to_dict()
     return {"strategy": job["name"], "model": job["model"], "spec": spec, "sigma_p": spec.get("sigma_p"),
-            "width": spec.get("width"), "seeds": [r["seed"] for r in runs], "n_train": int(len(y)),
-            "data_seconds": t_data, "train_seconds": float(sum(r["train_seconds"] for r in runs)),
-            "runs": [{k: v for k, v in r.items() if k != "predictions"} for r in runs],
-            "predictions": {t: [r["predictions"][t] for r in runs] for t in runs[0]["predictions"]}}
+            "width": spec.get("width"), "seeds": [f["seed"] for f in fits], "n_train": int(len(data["y"])),
+            "data_seconds": data["seconds"], "train_seconds": float(sum(r["train_seconds"] for r in done)),
+            "runs": [{"seed": int(f["seed"]), "train_seconds": r["train_seconds"], "epochs_run": r["epochs_run"]}
+                     for f, r in zip(fits, done)],
+            "predictions": {t: [r["predictions"][t] for r in done] for t in job["tests"]}}
+
+
+@announced(lambda job: job["stage"])
+def train_stage(job: dict) -> dict:
+    """A whole training stage in one process: its training set once, then every run
+    (:func:`stage_fits`), then its record (:func:`stage_result`)."""
+    from ..radar.progress import echo
+
+    data = stage_data(job)
+    fits = stage_fits(job, data)
+    echo(f"[{job['stage']}] training set of {len(data['y'])} profiles in {data['seconds']:.1f} s; "
+         f"{len(fits)} training run(s)")
+    return stage_result(job, data, fits, [fit_predict(f) for f in fits])

@@ -44,7 +44,7 @@ from ..strategies import STRATEGIES, TrainingSpec, training_set
 from . import jobs, statistics, verdicts
 from .cache import StageCache, settings_key
 from .config import StudyConfig
-from .executor import make_executor
+from .executor import SerialExecutor, make_executor
 from .identity import check_study_folder, claim, study_key
 from .results_file import jsonable as _jsonable
 from .results_file import write_results
@@ -86,9 +86,10 @@ class Study(TrainingStages):
         # the key without n_boot: the stages store predictions, scored afterwards
 
     # ---- stage 1: data -------------------------------------------------------------
-    def data(self) -> dict:
+    def data(self, executor=None) -> dict:
+        """Stage 1 (cached); simulated campaigns are the executor's jobs (None: here)."""
         def compute():
-            sets, acq = self._simulated_sets() if self.cfg.simulated else self._file_sets()
+            sets, acq = self._simulated_sets(executor) if self.cfg.simulated else self._file_sets()
             index = {"sets": {}, "acquisition": acq.to_dict()}
             for name, (X, y, *drones) in sets.items():
                 path = self.out / "data" / f"{name}.npz"
@@ -130,32 +131,41 @@ class Study(TrainingStages):
         acq = stated[0][1] if stated else Acquisition.measured(k or 1)
         return sets, acq
 
-    def _simulated_sets(self):
-        from ..generator.chain import SceneConfig, simulate_campaign
+    def _simulated_sets(self, executor):
+        from ..generator.chain import SceneConfig
         from ..generator.specimens import SpecimenSpread
 
         sim = self.cfg.simulation
         scene = SceneConfig().with_acquisition(ramps=sim.ramps)
         reference = scene.replace(specimens=SpecimenSpread.exact())
+        d = sim.calibration_drones
+        # 1 drone: the reference drone itself, its other acquisitions held out for the choices; more:
+        # drones of the specimen model and one drone more, held out whole (no strategy is calibrated on it)
+        n_drones = 1 if d == 1 else d + 1
+        work = []
+        for cls in self.cfg.classes:
+            n = sim.n_new.get(cls, 44)
+            work += [{"cls": cls, "part": "reference", "n_specimens": n_drones,
+                      "n": n_drones * (sim.n_calibration + sim.n_select), "scene": reference if d == 1 else scene,
+                      "seed": _stage_seed(self.cfg, "reference", cls)},
+                     {"cls": cls, "part": "new", "n_specimens": sim.new_specimens, "n": n, "scene": scene,
+                      "seed": _stage_seed(self.cfg, "new", cls)}]
+            if sim.large_factor > 1:
+                work.append({"cls": cls, "part": "new_large", "n_specimens": 2 * sim.new_specimens,
+                             "n": n * sim.large_factor, "scene": scene, "seed": _stage_seed(self.cfg, "new_large", cls)})
+        order = sorted(range(len(work)), key=lambda i: -work[i]["n"])  # the largest first, over the workers
+        done = dict(zip(order, _imap(executor or SerialExecutor(), jobs.campaign, [work[i] for i in order])))
+        camps = {(w["cls"], w["part"]): done[i] for i, w in enumerate(work)}
         sets, select, new, large = {}, {}, {}, {}
         for cls in self.cfg.classes:
-            # 1 drone: the reference drone itself, its other acquisitions held out for the choices; more:
-            # drones of the specimen model and one drone more, held out whole (no strategy is calibrated on it)
-            d = sim.calibration_drones
-            n_drones = 1 if d == 1 else d + 1
-            camp = simulate_campaign(cls, n_drones, n_drones * (sim.n_calibration + sim.n_select),
-                                     _stage_seed(self.cfg, "reference", cls), scene=reference if d == 1 else scene)
-            first = np.concatenate([np.flatnonzero(camp.specimen == k)[: sim.n_calibration] for k in range(d)])
-            rest = np.setdiff1d(np.arange(len(camp)), first) if d == 1 else np.flatnonzero(camp.specimen == d)
-            sets[f"calibration_{cls}"] = (camp.profiles[first], camp.labels[first], camp.specimen[first])
-            select[cls] = (camp.profiles[rest], camp.labels[rest], camp.specimen[rest])
-            n = sim.n_new.get(cls, 44)
-            camp = simulate_campaign(cls, sim.new_specimens, n, _stage_seed(self.cfg, "new", cls), scene=scene)
-            new[cls] = (camp.profiles, camp.labels, camp.specimen)
-            if sim.large_factor > 1:
-                camp = simulate_campaign(cls, 2 * sim.new_specimens, n * sim.large_factor,
-                                         _stage_seed(self.cfg, "new_large", cls), scene=scene)
-                large[cls] = (camp.profiles, camp.labels, camp.specimen)
+            profiles, labels, specimen = camps[cls, "reference"]
+            first = np.concatenate([np.flatnonzero(specimen == k)[: sim.n_calibration] for k in range(d)])
+            rest = np.setdiff1d(np.arange(len(labels)), first) if d == 1 else np.flatnonzero(specimen == d)
+            sets[f"calibration_{cls}"] = (profiles[first], labels[first], specimen[first])
+            select[cls] = (profiles[rest], labels[rest], specimen[rest])
+            new[cls] = camps[cls, "new"]
+            if (cls, "new_large") in camps:
+                large[cls] = camps[cls, "new_large"]
 
         def cat(parts):
             return tuple(np.concatenate([p[i] for p in parts.values()]) for i in range(len(next(iter(parts.values())))))
@@ -319,7 +329,7 @@ class Study(TrainingStages):
         t_start = time.perf_counter()
         executor = make_executor(self.cfg.workers, self.cfg.scheduler)
         try:
-            index = self.data()
+            index = self.data(executor)
             acq = self.acquisition(index)
             self.log(f"acquisition: {acq.describe()}")
             tests = self.test_sets(index)
@@ -336,9 +346,10 @@ class Study(TrainingStages):
                 if "sigma_p_published" in specs else None
             for n, c in choice.items():
                 self.log(f"choice [{n}]: {c['parameter']} = {c['value']} (on '{sel_name}')")
-            strategies = self.cnns(self.cnn_jobs(specs, choice, select, tests), executor)
+            strategies, ceiling = self.training(self.cnn_jobs(specs, choice, select, tests),
+                                                self.ceiling_job(tests, select) if self.cfg.simulated else None,
+                                                executor)
             figure = self.profiles_figure(specs, choice, tests)
-            ceiling = self.ceiling(tests, select, executor) if self.cfg.simulated else None
             speed = self.speed(acq)
         finally:
             executor.close()
@@ -370,8 +381,8 @@ class Study(TrainingStages):
 def stage_names(cfg: StudyConfig) -> list[str]:
     """The stages a study of ``cfg`` runs, in order."""
     names = ["data", *(f"calibrate_{c}" for c in cfg.classes), "candidates",
-             *(f"cnn_{s}" for s in cfg.protocol.strategies), "profiles_figure"]
-    return names + (["ceiling"] if cfg.simulated else []) + ["speed"]
+             *(f"cnn_{s}" for s in cfg.protocol.strategies)]
+    return names + (["ceiling"] if cfg.simulated else []) + ["profiles_figure", "speed"]
 
 
 def _label(name: str, spec: TrainingSpec) -> str:

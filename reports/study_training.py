@@ -9,13 +9,17 @@ seed (so it is the single CNN of a one-run study), run ``i`` > 0 from
 ``child_seed(seed, "cnn", strategy, i)`` (the one seed helper), so runs do not depend
 on the order or process they run in. The stages store predictions; :mod:`.statistics`
 scores them.
+
+With workers, the uncached stages are one pool of jobs (:meth:`TrainingStages.training`):
+their training sets, then every run of every stage as a job of its own
+(:func:`mdaug.reports.jobs.fit_predict`), the longest first; a stage is stored when its
+last run is in. The records are those of the one-process path
+(:func:`mdaug.reports.jobs.train_stage`), run for run.
 """
 from __future__ import annotations
 
-import numpy as np
 
 from ..radar.seeds import child_seed
-from ..radar.seeds import rng as seeded_rng
 from ..strategies import TrainingSpec
 from . import jobs
 from .cache import settings_key
@@ -65,64 +69,70 @@ class TrainingStages:
         # the spec's files by their place in the study folder: a moved folder, or another working directory, resumes
         return settings_key(self.cnn_key, job["name"], self.cache.relative(job["spec"].to_dict()), job["run_seeds"])
 
-    def cnns(self, cnn_jobs: dict, executor) -> dict:
-        """Every strategy's stage result (cached; uncached strategies go to the executor together)."""
-        todo = [j for name, j in cnn_jobs.items() if not self.cache.has(f"cnn_{name}", self._cnn_key(j), CNN_NEEDS)]
-        if len(todo) > 1 and self.cfg.workers > 1:
-            for job in todo:
-                self.cache.started(f"cnn_{job['name']}")
-            for job, res in zip(todo, executor.map(jobs.train_and_test, todo)):
-                self.cache.store(f"cnn_{job['name']}", self._cnn_key(job), res,
-                                 res["data_seconds"] + res["train_seconds"], " in a worker (data and training)")
-        return {name: self.cache.run(f"cnn_{name}", self._cnn_key(j), lambda j=j: jobs.train_and_test(j), CNN_NEEDS)
-                for name, j in cnn_jobs.items()}
-
     # ---- stage 6: separability ceiling --------------------------------------------------------------
-    def ceiling(self, tests: dict, select, executor=None) -> dict:
-        """Classifiers trained on the scene simulator's own data (other specimens): the
-        fast models once, the CNN ``cnn_seeds`` times (like the strategies' CNNs), all
-        on the whole set; every fit is a job of ``executor``
-        (None: in this process). Predictions only; scored and chosen (on the selection
-        set) with everything else."""
-        from ..generator import load_reference
-        from ..generator.chain import SceneConfig, draw_specimens, render_through_chain
-
+    def ceiling_job(self, tests: dict, select) -> dict:
+        """The ceiling's stage job: classifiers trained on the scene simulator's own data
+        (other specimens): the fast models once, the CNN ``cnn_seeds`` times (like the
+        strategies' CNNs), all on the whole set. Predictions only; scored and chosen (on
+        the selection set) with everything else."""
         sim, p = self.cfg.simulation, self.cfg.protocol
-        classes = sorted(self.cfg.classes)
+        sel_name, sel_data, _ = select
+        fits = []
+        for model in CEILING_MODELS:  # the CNN: like for like with the strategies' CNNs
+            first = child_seed(self.cfg.seed, "ceiling", model)
+            params = {"epochs": p.cnn_epochs, "patience": p.cnn_patience, "device": self.cfg.device,
+                      "precision": p.cnn_precision} if model == "cnn" else {}
+            fits += [(model, seed, params)
+                     for seed in run_seeds(first, self.cfg.seed, p.cnn_seeds if model == "cnn" else 1, "ceiling", model)]
+        return {"kind": "ceiling", "stage": "ceiling", "seed": self.cfg.seed, "classes": list(self.cfg.classes),
+                "ramps": sim.ramps, "n_specimens": 2 * sim.new_specimens, "per_class": sim.ceiling_per_class,
+                "tests": {sel_name: sel_data, **tests}, "fits": fits,
+                "key": settings_key(self.key, sim.ceiling_per_class, p.cnn_seeds, p.cnn_epochs, p.cnn_patience,
+                                    p.cnn_precision),
+                "what": "trained on the scene simulator's own data "
+                        f"({sim.ceiling_per_class} acquisitions per class of {2 * sim.new_specimens} other specimens, "
+                        f"through the chain's reduced computation; the CNN {p.cnn_seeds} times, like the strategies')"}
 
-        def compute():
-            scene = SceneConfig().with_acquisition(ramps=sim.ramps)
-            parts, labels = [], []
-            for c in self.cfg.classes:
-                rng = seeded_rng(child_seed(self.cfg.seed, "ceiling", c))  # as before: same specimens
-                specimens = draw_specimens(load_reference(c).to_array(), 2 * sim.new_specimens, scene, rng)
-                x = specimens[np.arange(sim.ceiling_per_class) % len(specimens)]
-                parts.append(render_through_chain(x, scene, random_state=child_seed(self.cfg.seed, "ceiling-chain",
-                                                                                    c)).profiles)
-                labels.append(np.full(sim.ceiling_per_class, c))
-            X, y = np.concatenate(parts), np.concatenate(labels)
-            sel_name, sel_data, _ = select
-            sets = {sel_name: sel_data, **tests}
-            result = {"n_train": int(len(y)), "models": {}, "what": "trained on the scene simulator's own data "
-                      f"({sim.ceiling_per_class} acquisitions per class of {2 * sim.new_specimens} other specimens, "
-                      f"through the chain's reduced computation; the CNN {p.cnn_seeds} times, like the strategies')"}
-            work = []
-            for model in CEILING_MODELS:  # the CNN: like for like with the strategies' CNNs
-                first = child_seed(self.cfg.seed, "ceiling", model)
-                params = {"epochs": p.cnn_epochs, "patience": p.cnn_patience, "device": self.cfg.device,
-                          "precision": p.cnn_precision} \
-                    if model == "cnn" else {}
-                for seed in run_seeds(first, self.cfg.seed, p.cnn_seeds if model == "cnn" else 1, "ceiling", model):
-                    work.append({"model": model, "seed": seed, "params": params, "X": X, "y": y, "tests": sets,
-                                 "classes": classes})
-            done = executor.map(jobs.fit_predict, work) if executor is not None else map(jobs.fit_predict, work)
-            for job, res in zip(work, done):
-                m = result["models"].setdefault(job["model"], {"train_seconds": 0.0, "seeds": [],
-                                                               "predictions": {n: [] for n in sets}})
-                m["train_seconds"] += res["train_seconds"]
-                m["seeds"].append(job["seed"])
-                for n in sets:
-                    m["predictions"][n].append(res["predictions"][n])
-            return result
-        return self.cache.run("ceiling", settings_key(self.key, sim.ceiling_per_class, p.cnn_seeds, p.cnn_epochs,
-                                                      p.cnn_patience, p.cnn_precision), compute)
+    # ---- stages 5 and 6 together -----------------------------------------------------------------------
+    def training(self, cnn_jobs: dict, ceiling_job: dict | None, executor) -> tuple[dict, dict | None]:
+        """Every strategy's CNN stage and the ceiling (None: none), each cached. With
+        workers, the uncached stages run as one pool of jobs: their training sets first,
+        then every training run of every stage, the longest first (a stage's runs are
+        separate jobs, so two workers share out six strategies' eighteen runs evenly)."""
+        stages = [(f"cnn_{name}", self._cnn_key(j), CNN_NEEDS, {**j, "kind": "cnn", "stage": f"cnn_{name}"})
+                  for name, j in cnn_jobs.items()]
+        if ceiling_job is not None:
+            stages.append(("ceiling", ceiling_job["key"], (), ceiling_job))
+        todo = [s for s in stages if not self.cache.has(s[0], s[1], s[2])]
+        if len(todo) > 1 and self.cfg.workers > 1:
+            self._train_in_workers(todo, executor)
+        done = {name: self.cache.run(name, key, lambda j=job: jobs.train_stage(j), needs)
+                for name, key, needs, job in stages}
+        strategies = {name: done[f"cnn_{name}"] for name in cnn_jobs}
+        return strategies, done.get("ceiling")
+
+    def cnns(self, cnn_jobs: dict, executor) -> dict:
+        """Every strategy's CNN stage (cached; :meth:`training` without the ceiling)."""
+        return self.training(cnn_jobs, None, executor)[0]
+
+    def _train_in_workers(self, todo: list, executor) -> None:
+        for name, *_ in todo:
+            self.cache.started(name)
+        data = list(executor.map(jobs.stage_data_job, [job for *_, job in todo]))
+        per_stage = [jobs.stage_fits(job, data[k]) for k, (*_, job) in enumerate(todo)]
+        queue = sorted(((k, i, f) for k, fits in enumerate(per_stage) for i, f in enumerate(fits)),
+                       key=lambda kif: -_cost(kif[2]))  # the longest first: the last jobs to end are short
+        results = [[None] * len(fits) for fits in per_stage]
+        for (k, i, _), res in zip(queue, executor.map(jobs.fit_predict, [f for *_, f in queue])):
+            results[k][i] = res
+            if all(r is not None for r in results[k]):
+                name, key, _, job = todo[k]
+                seconds = data[k]["seconds"] + sum(r["train_seconds"] for r in results[k])
+                self.cache.store(name, key, jobs.stage_result(job, data[k], per_stage[k], results[k]), seconds,
+                                 " in a worker (data and training)")
+
+
+def _cost(fit: dict) -> float:
+    """A training run's rough cost, to hand out the longest first: profiles x epochs."""
+    epochs = fit.get("params", {}).get("epochs", 1) if fit["model"] == "cnn" else 0.2
+    return len(fit["y"]) * epochs

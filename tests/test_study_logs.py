@@ -36,8 +36,8 @@ def test_the_stage_cache_logs_start_and_end_of_every_stage(tmp_path):
 
 def test_worker_jobs_log_their_start_and_end_in_the_worker(capfd):
     x, y = _toy()
-    work = [{"model": "nb", "seed": s, "params": {}, "X": x, "y": y, "tests": {"t": (x, y)}, "classes": CLASSES}
-            for s in (1, 2, 3)]
+    work = [{"model": "nb", "seed": s, "params": {}, "X": x, "y": y, "tests": {"t": (x, y)}, "classes": CLASSES,
+             "label": f"ceiling: nb (seed {s})"} for s in (1, 2, 3)]
     pool = ProcessExecutor(2)
     try:
         done = pool.map(jobs.fit_predict, work)
@@ -83,6 +83,49 @@ def test_cnn_stages_in_workers_log_start_runs_and_end(tmp_path, capfd):
         assert start < end
     out = capfd.readouterr().out
     for name in ("sigma_p_published", "tsaug"):
-        assert re.search(rf"\[cnn_{name}\] started in worker \d+", out), out
+        # the stage's training set, then each run, each a job of its own that logs its start and end
+        assert re.search(rf"\[cnn_{name}: training set\] started in worker \d+", out), out
         assert f"[cnn_{name}] run 1/2 trained in " in out and f"[cnn_{name}] run 2/2 trained in " in out
-        assert re.search(rf"\[cnn_{name}\] done in [\d.]+ s in worker \d+", out), out
+        for run in (1, 2):
+            assert re.search(rf"\[cnn_{name} run {run}/2\] started in worker \d+", out), out
+            assert re.search(rf"\[cnn_{name} run {run}/2\] done in [\d.]+ s in worker \d+", out), out
+
+
+def test_training_in_workers_gives_the_one_process_records_run_for_run(tmp_path):
+    """The pool path (training sets, then every run of every stage as its own job, the
+    longest first) stores what the one-process path stores: same seeds, same
+    predictions, in the stage's own run order (the ceiling's runs are handed out in
+    another order than they are recorded in)."""
+    from mdaug.reports.config import StudyConfig
+    from mdaug.reports.executor import SerialExecutor
+    from mdaug.reports.study import Study
+    from mdaug.strategies import TrainingSpec
+
+    records = {}
+    for workers in (1, 2):
+        cfg = StudyConfig(seed=7, workers=workers).quick_version()
+        cfg.protocol = dataclasses.replace(cfg.protocol, cnn_n_per_class=40, cnn_epochs=2, cnn_seeds=2,
+                                           tsaug_n_per_class=30, tsaug_epochs=1)
+        cfg.simulation = dataclasses.replace(cfg.simulation, ceiling_per_class=20, new_specimens=1)
+        study = Study(cfg, tmp_path / f"w{workers}", log=lambda *_: None)
+        x, y = _toy(40, 1)
+        specs = {"sigma_p_published": [TrainingSpec("sigma_p_published", sigma_p=0.2, normalisation="peak",
+                                                    through_chain=False)],
+                 "tsaug": [TrainingSpec("tsaug", normalisation="peak", profiles=x, labels=y)]}
+        cnn_jobs = study.cnn_jobs(specs, {"sigma_p_published": {"value": 0.2}}, ("select", (x, y), "x"),
+                                  {"new": (x, y)})
+        pool = ProcessExecutor(2) if workers == 2 else SerialExecutor()
+        try:
+            records[workers] = study.training(cnn_jobs, study.ceiling_job({"new": (x, y)}, ("select", (x, y), "x")),
+                                              pool)
+        finally:
+            pool.close()
+    (one, ceil_one), (pool_, ceil_pool) = records[1], records[2]
+    for name in ("sigma_p_published", "tsaug"):
+        assert one[name]["seeds"] == pool_[name]["seeds"] and len(one[name]["seeds"]) == 2
+        assert one[name]["predictions"] == pool_[name]["predictions"]
+    assert list(ceil_one["models"]) == list(ceil_pool["models"]) == ["svm", "xgb", "nb", "cnn"]
+    for model, m in ceil_one["models"].items():
+        assert m["seeds"] == ceil_pool["models"][model]["seeds"]
+        assert m["predictions"] == ceil_pool["models"][model]["predictions"]
+    assert ceil_one["n_train"] == ceil_pool["n_train"] == 40
