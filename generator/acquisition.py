@@ -288,6 +288,7 @@ def draw_acquisitions(x, acq: Acquisition, rng: np.random.Generator,
     """Every random quantity of n acquisitions of vectors x (n, 13E), in a fixed order
     (so the same seed gives the same draws whatever is rendered afterwards)."""
     x = validate_vectors(x, physical=False)
+    radar.check_ramps(acq.ramps)
     n, e = x.shape[0], x.shape[1] // N_PARAMS
     yaw = rng.uniform(-acq.yaw_deg, acq.yaw_deg, n) if acq.yaw_deg else np.zeros(n)
     seen = yaw_mix(x, np.radians(yaw)) if acq.yaw_deg else x.copy()

@@ -41,7 +41,9 @@ class RadarConfig:
     slice_length: int = 400
     ramp_time_up_s: float = 2.56e-3
     ramp_time_down_s: float = 0.32e-3
-    ramps_per_frame: int = 1000
+    max_ramps_per_frame: int = 1000
+    """The most ramps the platform runs in one frame: the bound on an acquisition's K
+    (the ramps a frame's profile averages, ``Acquisition.ramps``; :meth:`check_ramps`)."""
     frame_interval_s: float = 0.2
     model_range_m: float = 3.0
     """Default model range R0 of the vibration model (m, model convention)."""
@@ -60,7 +62,7 @@ class RadarConfig:
             "slice_length": 2 <= self.slice_length <= self.fft_points // 2,
             "ramp_start_hz": 0 < self.ramp_start_hz < self.ramp_stop_hz,
             "model_range_m": self.model_range_m > 0,
-            "ramps_per_frame": self.ramps_per_frame >= 1,
+            "max_ramps_per_frame": self.max_ramps_per_frame >= 1,
         }
         for field, ok in checks.items():
             if not ok:
@@ -138,6 +140,12 @@ class RadarConfig:
         """Change of model range R0 that moves the tone by one bin, m."""
         return C0 * self.bin_hz / (4.0 * self.slope_hz_per_s)
 
+    def check_ramps(self, k: int, what: str = "Acquisition.ramps") -> None:
+        """Refuse K ramps per frame beyond what the radar runs (``what`` names the setting)."""
+        if k > self.max_ramps_per_frame:
+            raise ValueError(f"{what} = {k}: more ramps per frame than the radar runs "
+                             f"(RadarConfig.max_ramps_per_frame = {self.max_ramps_per_frame})")
+
     def replace(self, **changes) -> "RadarConfig":
         return dataclasses.replace(self, **changes)
 
@@ -147,6 +155,8 @@ class RadarConfig:
     @classmethod
     def from_dict(cls, d: dict, source: str = "radar config") -> "RadarConfig":
         known = {f.name for f in dataclasses.fields(cls)}
+        if "ramps_per_frame" in d and "max_ramps_per_frame" not in d:  # its earlier name, in the shipped estimators and older files
+            d = {("max_ramps_per_frame" if k == "ramps_per_frame" else k): v for k, v in d.items()}
         unknown = sorted(set(d) - known)
         if unknown:
             raise ValueError(f"{source}: unknown radar field(s) {unknown}; known: {sorted(known)}")

@@ -148,3 +148,26 @@ def test_fast_path_matches_the_chain_in_distribution():
     s = slice(120, 280)
     assert np.abs(data.mean(0) - fast.mean(0))[s].max() < 0.025
     assert fast.std(0)[s].mean() == pytest.approx(data.std(0)[s].mean(), rel=0.3)
+
+
+def test_k_beyond_the_radars_ramps_per_frame_is_refused_on_both_paths():
+    """The radar runs at most RadarConfig.max_ramps_per_frame ramps in a frame: an
+    acquisition asking more is refused by name, on the fast path and in the chain; a
+    radar table of older files (the field's earlier name) still reads."""
+    from mdaug.generator import load_reference
+    from mdaug.generator.acquisition import draw_acquisitions
+    from mdaug.generator.chain import SceneConfig, render_through_chain
+
+    x = load_reference("HELI").to_array()[None]
+    small = RadarConfig(max_ramps_per_frame=8)
+    draw_acquisitions(x, Acquisition.measured(8), np.random.default_rng(0), small)  # at the bound: fine
+    with pytest.raises(ValueError, match=r"Acquisition\.ramps = 32: .*RadarConfig\.max_ramps_per_frame = 8"):
+        draw_acquisitions(x, Acquisition.measured(32), np.random.default_rng(0), small)
+    scene = SceneConfig().with_acquisition(ramps=32)
+    with pytest.raises(ValueError, match=r"SceneConfig\.acquisition\.ramps = 32: .*max_ramps_per_frame = 8"):
+        render_through_chain(x, scene, small, random_state=0)
+    old = {**RadarConfig().to_dict(), "ramps_per_frame": 500}
+    del old["max_ramps_per_frame"]
+    assert RadarConfig.from_dict(old).max_ramps_per_frame == 500
+    with pytest.raises(ValueError, match=r"unknown radar field\(s\) \['ramps'\]"):
+        RadarConfig.from_dict({**RadarConfig().to_dict(), "ramps": 4})

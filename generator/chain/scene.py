@@ -85,6 +85,7 @@ class Draws:
 
 def draw_acquisitions(specimens: np.ndarray, n: int, scene: SceneConfig, radar: RadarConfig,
                       rng: np.random.Generator) -> Draws:
+    radar.check_ramps(scene.acquisition.ramps, "SceneConfig.acquisition.ramps")
     s = specimens.shape[0]
     spec = (np.arange(n) * s) // n
     f, c = scene.frames(radar), scene.n_clutter
