@@ -98,7 +98,7 @@ def run_train(args) -> int:
 def run_sbc(args) -> int:
     from ..generator.acquisition import Acquisition
     from ..inference.amortized.job import estimator_sbc
-    from ..inference.amortized.sbc import headline
+    from ..inference.diagnostics.routes import headline
     from ..inference.amortized.shipped import find
     from ..inference.settings import CalibrationSettings
     from ..radar.progress import progress_enabled

@@ -232,7 +232,7 @@ def test_data_of_another_acquisition_or_class_is_refused(tiny):
 def test_sbc_machinery_on_a_toy_with_a_known_posterior():
     """theta ~ N(0, 1), 5 measurements x ~ N(theta, 1): the exact posterior is
     N(sum x / 6, 1 / 6). Exact draws pass; draws 3x too narrow fail."""
-    from mdaug.inference.amortized.sbc import run
+    from mdaug.inference.diagnostics.routes import run
 
     rng = np.random.default_rng(0)
     truths = rng.normal(size=(300, 2))

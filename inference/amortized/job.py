@@ -16,8 +16,8 @@ import numpy as np
 from ...radar.seeds import child_seed, seed_sequence
 from .estimator import AmortizedEstimator
 from .nets import NetConfig
-from .sbc import headline
-from .sbc import run as run_sbc
+from ..diagnostics.routes import headline
+from ..diagnostics.routes import run as run_sbc
 from .simulate import SimulationSpec, load_shards, simulate, simulate_shards
 from .target import LabelFree
 from .train import TrainConfig, device_of, fit, posterior_loss, ratio_loss

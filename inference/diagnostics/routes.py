@@ -2,7 +2,7 @@
 
 ``draw(profiles, n, seed) -> q draws (n, d)`` is the route under test (the amortized
 posterior, or nlopt + emcee on the learned likelihood). For each truth: the rank of
-its label-free quantities among n_rank draws (:func:`mdaug.inference.diagnostics.sbc.summarise`
+its label-free quantities among n_rank draws (:func:`.sbc.summarise`
 turns ranks into the rank chi-square p-values and the outer-10% share, 0.10 when
 honest), the coverage of central intervals at several levels (the coverage curve),
 the median 90% width over the truth beside the prior's, and TARP (Lemos et al. 2023,
@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from ..diagnostics.sbc import summarise
+from .sbc import summarise
 
 LEVELS = (0.5, 0.6, 0.7, 0.8, 0.9, 0.95)
 
