@@ -111,6 +111,17 @@ def wrap_phase(phase: np.ndarray) -> np.ndarray:
     return phase - TWO_PI * np.rint(phase * (1.0 / TWO_PI))
 
 
+def circular_stats(phi: np.ndarray, q=(0.05, 0.95)) -> dict:
+    """Circular mean, sd = sqrt(-2 ln R), mean resultant length R and a central
+    interval (quantiles of the phases unwrapped around the mean) of draws (n,)."""
+    c, s = np.mean(np.cos(phi)), np.mean(np.sin(phi))
+    r = float(np.hypot(c, s))
+    mu = float(np.arctan2(s, c))
+    centred = wrap_phase(phi - mu)
+    lo, hi = np.quantile(centred, q) + mu
+    return {"mean": mu, "sd": float(np.sqrt(-2 * np.log(max(r, 1e-12)))), "R": r, "q05": float(lo), "q95": float(hi)}
+
+
 def vibration_terms(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Amplitudes, angular frequencies and phases of the four terms of every engine.
 

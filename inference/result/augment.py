@@ -25,8 +25,8 @@ from ...generator.augment import ModelAugmenter, Renderer, SpecimenSource, Vecto
 from ...generator.params import NONNEGATIVE, N_PARAMS, PHASES
 from ...generator.specimens import SpecimenSpread
 from ...radar import RadarConfig
-from ...generator.model import wrap_phase
-from .posterior import CalibrationResult, circular_stats
+from ...generator.model import circular_stats, wrap_phase
+from .posterior import CalibrationResult
 
 
 def load_posterior(posterior, label: str | None = None, allow_unconverged: bool = True) -> CalibrationResult:

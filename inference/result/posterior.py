@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ...generator import IDX, N_PARAMS, PARAM_NAMES
-from ...generator.model import wrap_phase
+from ...generator.model import circular_stats, wrap_phase
 from ..space.priors import PHASE_NAMES, SHARED, Priors, engine_lines
 
 FORMAT = "mdaug-posterior-2"
@@ -44,17 +44,6 @@ def import_arviz():
         warnings.simplefilter("ignore", FutureWarning)
         import arviz as az
     return az
-
-
-def circular_stats(phi: np.ndarray, q=(0.05, 0.95)) -> dict:
-    """Circular mean, sd = sqrt(-2 ln R), mean resultant length R and a central
-    interval (quantiles of the phases unwrapped around the mean) of draws (n,)."""
-    c, s = np.mean(np.cos(phi)), np.mean(np.sin(phi))
-    r = float(np.hypot(c, s))
-    mu = float(np.arctan2(s, c))
-    centred = wrap_phase(phi - mu)
-    lo, hi = np.quantile(centred, q) + mu
-    return {"mean": mu, "sd": float(np.sqrt(-2 * np.log(max(r, 1e-12)))), "R": r, "q05": float(lo), "q95": float(hi)}
 
 
 class CalibrationResult:
