@@ -123,13 +123,17 @@ class TrainingStages:
         queue = sorted(((k, i, f) for k, fits in enumerate(per_stage) for i, f in enumerate(fits)),
                        key=lambda kif: -_cost(kif[2]))  # the longest first: the last jobs to end are short
         results = [[None] * len(fits) for fits in per_stage]
-        for (k, i, _), res in zip(queue, executor.map(jobs.fit_predict, [f for *_, f in queue])):
-            results[k][i] = res
-            if all(r is not None for r in results[k]):
-                name, key, _, job = todo[k]
-                seconds = data[k]["seconds"] + sum(r["train_seconds"] for r in results[k])
-                self.cache.store(name, key, jobs.stage_result(job, data[k], per_stage[k], results[k]), seconds,
-                                 " in a worker (data and training)")
+        from ..radar.progress import progress_bar
+
+        with progress_bar(total=len(queue), desc="training runs", unit="run", leave=False) as bar:
+            for (k, i, _), res in zip(queue, executor.map(jobs.fit_predict, [f for *_, f in queue])):
+                results[k][i] = res
+                bar.update(1)
+                if all(r is not None for r in results[k]):
+                    name, key, _, job = todo[k]
+                    seconds = data[k]["seconds"] + sum(r["train_seconds"] for r in results[k])
+                    self.cache.store(name, key, jobs.stage_result(job, data[k], per_stage[k], results[k]), seconds,
+                                     " in a worker (data and training)")
 
 
 def _cost(fit: dict) -> float:

@@ -13,6 +13,32 @@ def rng():
     return np.random.default_rng(12345)
 
 
+class FakeTTY:
+    """A stderr that says it is a terminal and keeps what is written (``text``)."""
+
+    def __init__(self):
+        self.parts = []
+
+    def isatty(self):
+        return True
+
+    def write(self, s):
+        self.parts.append(s)
+
+    def flush(self):
+        pass
+
+    @property
+    def text(self):
+        return "".join(self.parts)
+
+
+@pytest.fixture
+def terminal():
+    """A factory of :class:`FakeTTY` (a stderr that draws bars)."""
+    return FakeTTY
+
+
 def _tree(folder):
     """{relative path: sha256} of every file under ``folder`` (links by their target's bytes)."""
     import hashlib

@@ -155,29 +155,11 @@ def test_interrupt_prints_one_line_and_exits_130(verb, target, argv, says, never
 
 
 # ---- progress --------------------------------------------------------------------------------
-class FakeTTY:
-    def __init__(self):
-        self.parts = []
-
-    def isatty(self):
-        return True
-
-    def write(self, s):
-        self.parts.append(s)
-
-    def flush(self):
-        pass
-
-    @property
-    def text(self):
-        return "".join(self.parts)
-
-
-def test_progress_only_on_a_terminal_and_never_when_quiet(monkeypatch):
+def test_progress_only_on_a_terminal_and_never_when_quiet(monkeypatch, terminal):
     monkeypatch.delenv(QUIET_ENV, raising=False)
     assert not progress_enabled()  # pytest's stderr is not a terminal
     assert progress_enabled(True) and not progress_enabled(False)
-    tty = FakeTTY()
+    tty = terminal()
     monkeypatch.setattr(sys, "stderr", tty)
     assert progress_enabled()
     for _ in progress_bar(range(3), desc="steps", unit="step"):
@@ -191,11 +173,11 @@ def test_progress_only_on_a_terminal_and_never_when_quiet(monkeypatch):
     assert len(tty.parts) == before
 
 
-def test_cnn_shows_epochs_and_validation_accuracy_on_a_terminal(monkeypatch):
+def test_cnn_shows_epochs_and_validation_accuracy_on_a_terminal(monkeypatch, terminal):
     from mdaug.classify import make_classifier
 
     monkeypatch.delenv(QUIET_ENV, raising=False)
-    tty = FakeTTY()
+    tty = terminal()
     monkeypatch.setattr(sys, "stderr", tty)
     rng = np.random.default_rng(0)
     x, y = rng.random((60, 400)), np.array(["A", "B"] * 30)
@@ -203,7 +185,7 @@ def test_cnn_shows_epochs_and_validation_accuracy_on_a_terminal(monkeypatch):
     assert "CNN epochs" in tty.text and "2/2" in tty.text and "val acc" in tty.text
 
 
-def test_sweep_shows_its_cells_and_the_study_its_stages(monkeypatch, tmp_path):
+def test_sweep_shows_its_cells_and_the_study_its_stages(monkeypatch, tmp_path, terminal):
     from mdaug.classify import sigma_p_sweep
     from mdaug.cli.study import StageProgress
     from mdaug.reports.study import stage_names
@@ -211,7 +193,7 @@ def test_sweep_shows_its_cells_and_the_study_its_stages(monkeypatch, tmp_path):
     from mdaug.reports.config import StudyConfig
 
     monkeypatch.delenv(QUIET_ENV, raising=False)
-    tty = FakeTTY()
+    tty = terminal()
     monkeypatch.setattr(sys, "stderr", tty)
     rng = np.random.default_rng(0)
 

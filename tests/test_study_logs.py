@@ -91,11 +91,15 @@ def test_cnn_stages_in_workers_log_start_runs_and_end(tmp_path, capfd):
             assert re.search(rf"\[cnn_{name} run {run}/2\] done in [\d.]+ s in worker \d+", out), out
 
 
-def test_training_in_workers_gives_the_one_process_records_run_for_run(tmp_path):
+def test_training_in_workers_gives_the_one_process_records_run_for_run(tmp_path, monkeypatch, terminal):
     """The pool path (training sets, then every run of every stage as its own job, the
     longest first) stores what the one-process path stores: same seeds, same
     predictions, in the stage's own run order (the ceiling's runs are handed out in
-    another order than they are recorded in)."""
+    another order than they are recorded in); on a terminal the parent draws a bar
+    of the runs as they come back."""
+    import sys
+
+    from mdaug.radar.progress import QUIET_ENV
     from mdaug.reports.config import StudyConfig
     from mdaug.reports.executor import SerialExecutor
     from mdaug.reports.study import Study
@@ -115,11 +119,17 @@ def test_training_in_workers_gives_the_one_process_records_run_for_run(tmp_path)
         cnn_jobs = study.cnn_jobs(specs, {"sigma_p_published": {"value": 0.2}}, ("select", (x, y), "x"),
                                   {"new": (x, y)})
         pool = ProcessExecutor(2) if workers == 2 else SerialExecutor()
+        tty = terminal()
+        monkeypatch.delenv(QUIET_ENV, raising=False)
+        monkeypatch.setattr(sys, "stderr", tty)
         try:
             records[workers] = study.training(cnn_jobs, study.ceiling_job({"new": (x, y)}, ("select", (x, y), "x")),
                                               pool)
         finally:
             pool.close()
+            monkeypatch.undo()
+        # 2 strategies x 2 runs and the ceiling's 2 CNN runs + svm, xgb, nb: 9 runs, a bar in the pool path only
+        assert ("training runs:" in tty.text and "/9 [" in tty.text) == (workers == 2), tty.text[-300:]
     (one, ceil_one), (pool_, ceil_pool) = records[1], records[2]
     for name in ("sigma_p_published", "tsaug"):
         assert one[name]["seeds"] == pool_[name]["seeds"] and len(one[name]["seeds"]) == 2
