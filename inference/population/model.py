@@ -20,8 +20,13 @@ class's trained estimator by default, :mod:`..amortized.calibrate`, or the close
 route of :mod:`..calibrate`); its posterior draws, relabelled to the
 class reference's labelling (:func:`..space.priors.align_lines`), are summarised as a
 Gaussian in y on the coordinates the drone identifies (posterior sd <= 0.5 prior
-sd), with the role-space prior divided out (uniform in A, w, C: a tilt e^y in log
-coordinates, whose Gaussian quotient shifts the mean by -S 1). With Gaussian drone
+sd). The role-space prior is flat in its own coordinates (A, w, C; ln Gamma ratios),
+so there the posterior is the likelihood: its mean and covariance there, carried to y
+at the mean (y = ln x: mean ln m, covariance S_ij / (m_i m_j)). Dividing a Gaussian
+fitted in y by the prior's tilt e^y instead (mean - S 1) put the drones' summaries
+about one sd below their true values in the population SBC (the drones' likelihoods
+are near-Gaussian in x, skewed in y), and the unseen drone's lines above the
+population's predictive. With Gaussian drone
 likelihoods and a flat prior on mu, mu integrates out in closed form (a normal-
 normal model), and the hyper-posterior of the five spreads is a 5-dimensional
 density that emcee samples in milliseconds per step, through the one driver and
@@ -102,7 +107,7 @@ class PopulationModel:
                 cols.append(k * N_PARAMS + IDX["Gamma"]), kinds.append("gamma"), names.append(f"lnG[{k}]")
         self.cols, self.kinds, self.names = np.array(cols), np.array(kinds), names
         self.p = len(cols)
-        self.linear_prior = self.kinds != "gamma"  # uniform in x (tilt e^y); lnG is uniform in y
+        self.linear_prior = self.kinds != "gamma"  # the prior is flat in x; for the Gamma ratios in y
         freq = (self.kinds == "frequency").astype(float)
         gam = (self.kinds == "gamma").astype(float)
         self.basis = np.stack([np.outer(freq, freq),  # speed: common to all of a drone's frequencies
@@ -160,9 +165,15 @@ def summarise_drone(result, model: PopulationModel, reference: np.ndarray, speci
     post_sd = np.where(model.kinds == "gamma", y.std(axis=0), x[:, model.cols].std(axis=0))
     mask = post_sd <= IDENTIFIED_SD_RATIO * width / np.sqrt(12)
     k = int(mask.sum())
-    ys = y[:, mask]
-    cov = (np.cov(ys, rowvar=False).reshape(k, k) if k else np.zeros((0, 0))) + 1e-10 * np.eye(k)
-    mean = ys.mean(axis=0) - cov @ model.linear_prior[mask].astype(float)  # the prior's tilt divided out
+    # the prior is flat in its own coordinate, so there the posterior is the likelihood: its moments
+    # there, carried to the log coordinates at its mean (first order; the likelihood's peak in y)
+    lin = model.linear_prior[mask]
+    own = np.where(lin, np.exp(y[:, mask]), y[:, mask])
+    centre = own.mean(axis=0)
+    mean = np.where(lin, np.log(np.maximum(centre, 1e-9)), centre)
+    jac = np.where(lin, 1.0 / np.maximum(centre, 1e-9), 1.0)
+    cov = (np.cov(own, rowvar=False).reshape(k, k) if k else np.zeros((0, 0))) * np.outer(jac, jac) \
+        + 1e-10 * np.eye(k)
     return DroneSummary(str(specimen), mask, mean, cov, x)
 
 
