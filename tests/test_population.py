@@ -243,3 +243,29 @@ def test_population_sbc_compares_engines_in_a_label_free_order():
         assert np.array_equal(engines_in_order(x[perm].ravel()), base)
     assert base.reshape(4, 13)[:, IDX["Gamma"]].tolist() == [1.0, 0.6, 0.3, 0.05]
     assert np.array_equal(sbc_quantities(engines_in_order(x[[3, 1, 2, 0]].ravel()))[0], sbc_quantities(base)[0])
+
+
+def test_a_drone_summary_is_its_likelihood_where_the_prior_is_flat():
+    """A drone whose posterior is Gaussian in w (the prior is flat in w) is summarised in
+    y = ln w at the likelihood's peak, ln m, with sd s / m; a Gaussian fitted in y with
+    the prior's tilt divided out would sit about 1.5 (s / m)^2 lower."""
+    from types import SimpleNamespace
+
+    from mdaug.inference.population.model import summarise_drone
+    from mdaug.inference.space.priors import Priors
+
+    model, x0 = _model("HELI")
+    rng = np.random.default_rng(3)
+    m = {"w_a": x0[model.cols[model.names.index("w_a[0]")]], "w_b": x0[model.cols[model.names.index("w_b[0]")]]}
+    s = {k: 0.1 * v for k, v in m.items()}  # a drone posterior 10% wide (the lines keep their order)
+    draws = np.repeat(x0[None], 200_000, 0)
+    for k in m:
+        draws[:, model.cols[model.names.index(f"{k}[0]")]] = rng.normal(m[k], s[k], len(draws))
+    result = SimpleNamespace(draws=lambda: draws, priors=Priors.from_reference(load_reference("HELI")))
+    summary = summarise_drone(result, model, x0)
+    at = {k: list(np.flatnonzero(summary.mask)).index(model.names.index(f"{k}[0]")) for k in m}
+    for k, i in at.items():  # (the old tilt division: 1.5 x 0.1^2 = 0.015 lower)
+        assert summary.mean[i] == pytest.approx(np.log(m[k]), abs=0.003)
+        assert np.sqrt(summary.cov[i, i]) == pytest.approx(0.1, rel=0.03)  # (the relabelling trims the tails)
+    corr = summary.cov[at["w_a"], at["w_b"]] / np.sqrt(summary.cov[at["w_a"], at["w_a"]] * summary.cov[at["w_b"], at["w_b"]])
+    assert abs(corr) < 0.05  # independent draws stay about independent
