@@ -41,8 +41,10 @@ def test_covariance_is_the_specimen_models_in_log_coordinates():
 
 
 def test_log_marginal_is_the_gaussian_integral_over_the_class_mean():
-    """Two drones: the closed form equals N(m1 - m2; 0, C1 + C2) (flat prior on mu); one
-    drone: constant 0 (the spreads are not identified)."""
+    """Two drones: the closed form equals N(m1 - m2; 0, A1 + A2) times the integral of
+    mu's prior exp(t . mu) (t = 1 where the calibration prior is flat in x, 0 for the
+    ln Gamma ratios) over mu's Gaussian N(m, V): exp(t . m + t V t / 2); mu | spreads
+    is that Gaussian tilted, m + V t. One drone: exp(t . m1 + t A1 t / 2)."""
     model, _ = _model()
     rng = np.random.default_rng(1)
     p = model.p
@@ -54,15 +56,20 @@ def test_log_marginal_is_the_gaussian_integral_over_the_class_mean():
     spreads = np.array([[0.05, 0.02, 0.15, 0.15, 0.01], [0.1, 0.05, 0.3, 0.1, 0.05]])
     got, mu, P = log_marginal(spreads, [d1, d2], model, np.ones(p, bool))
     from scipy.stats import multivariate_normal
+    t = model.linear_prior.astype(float)
+    assert t.sum() == p - (model.kinds == "gamma").sum()  # flat in x but for the ln Gamma ratios
     for w, s in enumerate(spreads):
         sig = model.covariance(s)
-        want = multivariate_normal(np.zeros(p), c1 + c2 + 2 * sig).logpdf(m1 - m2)
+        a1, a2 = c1 + sig, c2 + sig
+        i1, i2 = np.linalg.inv(a1), np.linalg.inv(a2)
+        v = np.linalg.inv(i1 + i2)
+        m = v @ (i1 @ m1 + i2 @ m2)  # the precision-weighted mean of the two drones
+        want = multivariate_normal(np.zeros(p), a1 + a2).logpdf(m1 - m2) + t @ m + 0.5 * t @ v @ t
         assert got[w] == pytest.approx(want, abs=1e-8)
-        # mu | spreads: the precision-weighted mean of the two drones
-        i1, i2 = np.linalg.inv(c1 + sig), np.linalg.inv(c2 + sig)
-        assert np.allclose(mu[w], np.linalg.solve(i1 + i2, i1 @ m1 + i2 @ m2))
+        assert np.allclose(mu[w], m + v @ t)
     one, _, _ = log_marginal(spreads, [d1], model, np.ones(p, bool))
-    assert np.allclose(one, 0.0, atol=1e-9)
+    for w, s in enumerate(spreads):
+        assert one[w] == pytest.approx(t @ m1 + 0.5 * t @ (c1 + model.covariance(s)) @ t, abs=1e-8)
 
 
 def test_spreads_recovered_from_many_well_measured_drones():

@@ -27,8 +27,8 @@ fitted in y by the prior's tilt e^y instead (mean - S 1) put the drones' summari
 about one sd below their true values in the population SBC (the drones' likelihoods
 are near-Gaussian in x, skewed in y), and the unseen drone's lines above the
 population's predictive. With Gaussian drone
-likelihoods and a flat prior on mu, mu integrates out in closed form (a normal-
-normal model), and the hyper-posterior of the five spreads is a 5-dimensional
+likelihoods and mu's prior the calibration's own (flat in x: a tilt e^mu in y; flat in
+the ln Gamma ratios), mu integrates out in closed form (a normal-normal model), and the hyper-posterior of the five spreads is a 5-dimensional
 density that emcee samples in milliseconds per step, through the one driver and
 convergence rule of :func:`..samplers.emcee_run.run_ensemble`. Importance reweighting
 of per-drone samples (as in gravitational-wave population analyses) was not used: a
@@ -178,9 +178,13 @@ def summarise_drone(result, model: PopulationModel, reference: np.ndarray, speci
 
 
 def log_marginal(spreads: np.ndarray, drones: list[DroneSummary], model: PopulationModel, measured: np.ndarray):
-    """ln p(drone summaries | spreads) with mu integrated out under a flat prior, and
-    mu's conditional posterior: returns (logL (W,), mu_hat (W, q), P (W, q, q)) for
-    spreads (W, 5); q = measured.sum() coordinates identified by some drone."""
+    """ln p(drone summaries | spreads) with mu integrated out, and mu's conditional
+    posterior: returns (logL (W,), mu_hat (W, q), P (W, q, q)) for spreads (W, 5); q =
+    measured.sum() coordinates identified by some drone. mu's prior is the
+    calibration's, flat in the amplitudes, frequencies and skews (a tilt e^mu in log
+    coordinates; flat in the ln Gamma ratios): a flat prior in log coordinates put the
+    class mean, and so new drones, low by its posterior variance (the unseen drone's
+    lines ranked high in the population SBC)."""
     sig = model.covariance(np.atleast_2d(spreads))  # (W, p, p)
     W, q = sig.shape[0], int(measured.sum())
     pos = np.cumsum(measured) - 1  # index of each measured coordinate among the q
@@ -204,6 +208,7 @@ def log_marginal(spreads: np.ndarray, drones: list[DroneSummary], model: Populat
         j = pos[idx]
         P[:, j[:, None], j[None, :]] += cinv.sum(1)
         b[:, j] += cm.sum(1)
+    b += model.linear_prior[measured].astype(float)  # mu's prior: exp(t . mu)
     chol = np.linalg.cholesky(P)
     mu = np.linalg.solve(P, b[..., None])[..., 0]
     logl += 0.5 * np.einsum("wi,wi->w", b, mu) - np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(-1) \
