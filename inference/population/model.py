@@ -26,10 +26,10 @@ at the mean (y = ln x: mean ln m, covariance S_ij / (m_i m_j)). Dividing a Gauss
 fitted in y by the prior's tilt e^y instead (mean - S 1) put the drones' summaries
 about one sd below their true values in the population SBC (the drones' likelihoods
 are near-Gaussian in x, skewed in y), and the unseen drone's lines above the
-population's predictive. With Gaussian drone
-likelihoods and mu's prior the calibration's own (flat in x: a tilt e^mu in y; flat in
-the ln Gamma ratios), mu integrates out in closed form (a normal-normal model), and the hyper-posterior of the five spreads is a 5-dimensional
-density that emcee samples in milliseconds per step, through the one driver and
+population's predictive. With Gaussian drone likelihoods and mu's prior the
+calibration's own (flat in x: a tilt e^mu in y; flat in the ln Gamma ratios), mu
+integrates out in closed form (a normal-normal model), and the hyper-posterior of the
+five spreads is a 5-dimensional density that emcee samples in milliseconds per step, through the one driver and
 convergence rule of :func:`..samplers.emcee_run.run_ensemble`. Importance reweighting
 of per-drone samples (as in gravitational-wave population analyses) was not used: a
 drone's posterior is several times wider than the population spreads in 8-35
