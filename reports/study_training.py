@@ -111,10 +111,6 @@ class TrainingStages:
         strategies = {name: done[f"cnn_{name}"] for name in cnn_jobs}
         return strategies, done.get("ceiling")
 
-    def cnns(self, cnn_jobs: dict, executor) -> dict:
-        """Every strategy's CNN stage (cached; :meth:`training` without the ceiling)."""
-        return self.training(cnn_jobs, None, executor)[0]
-
     def _train_in_workers(self, todo: list, executor) -> None:
         for name, *_ in todo:
             self.cache.started(name)

@@ -110,7 +110,7 @@ def test_three_training_runs_each_lie_inside_the_reported_interval(tmp_path):
     first = child_seed(7, "cnn", "sigma_p_published")  # the one-run study's seed: its run is run 0
     assert job["seed"] == first and job["run_seeds"] == [first] + [child_seed(7, "cnn", "sigma_p_published", i)
                                                                    for i in (1, 2)]
-    stage = study.cnns(run_jobs, SerialExecutor())["sigma_p_published"]
+    stage = study.training(run_jobs, None, SerialExecutor())[0]["sigma_p_published"]
     assert len(stage["predictions"]["new"]) == 3 and len(set(stage["predictions"]["new"])) > 1
     m = statistics.score(statistics.truth(y, CLASSES), stage["predictions"]["new"], "new", 7, 500,
                          seeds=stage["seeds"])

@@ -73,7 +73,7 @@ def test_cnn_stages_in_workers_log_start_runs_and_end(tmp_path, capfd):
                               {"new": (x, y)})
     pool = ProcessExecutor(2)
     try:
-        study.cnns(cnn_jobs, pool)
+        study.training(cnn_jobs, None, pool)
     finally:
         pool.close()
     for name in ("sigma_p_published", "tsaug"):
