@@ -166,7 +166,7 @@ def run_calibrate(args) -> int:
                             f"one calibration takes at most {MAX_MEASUREMENTS} of one drone (the supported case is "
                             "a handful; --specimen ID picks one drone, --population calibrates each)")
     check_calibrate_sizes(args, settings, len(profiles))
-    from .calibrate_amortized import calibration_method, run_amortized
+    from .calibrate_amortized import amortized_settings, calibration_method, report_amortized
 
     method = calibration_method(args, acquisition)
     how = ("the class's trained estimator" if method == "amortized" else
@@ -181,8 +181,17 @@ def run_calibrate(args) -> int:
         from .calibrate_population import run_population
 
         return run_population(args, profiles, drones, settings, acquisition, method)
-    if method == "amortized":
-        return run_amortized(args, profiles, drones, settings, acquisition, cls)
+    if method == "amortized":  # the class's trained estimator: the acquisition goes straight to it
+        import warnings
+
+        from ..inference.amortized.calibrate import calibrate_amortized
+
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            res = calibrate_amortized(profiles, cls.upper(), acquisition=acquisition, estimator=args.estimator,
+                                      settings=amortized_settings(args, settings), random_state=args.seed,
+                                      route=args.route or "amortized", source=str(args.measured))
+        return report_amortized(args, res, drones, caught, cls)
     if len(set(drones.tolist())) > 1:
         warn("calibrate", f"{args.measured} holds {len(set(drones.tolist()))} drones of {cls} (field 'specimen'); "
                           "they are calibrated as one drone: --population calibrates each and the class's "

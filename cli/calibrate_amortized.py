@@ -1,6 +1,7 @@
 """``mdaug calibrate`` by the trained estimator (the amortized calibration): which
-method a command line asks for, and the run of one drone through
-:func:`mdaug.inference.amortized.calibrate.calibrate_amortized`."""
+method a command line asks for, the emcee route's settings, and the report of one
+drone's run (the run itself: :func:`mdaug.inference.amortized.calibrate.calibrate_amortized`,
+called by the verb)."""
 from __future__ import annotations
 
 from .common import EXIT_NOT_CONVERGED, result, warn
@@ -42,23 +43,18 @@ def calibration_method(args, acquisition) -> str:
     return method
 
 
-def run_amortized(args, profiles, drones, settings, acquisition, cls) -> int:
-    """One drone through the trained estimator: amortized draws, then nlopt + emcee on
-    the learned likelihood (:mod:`mdaug.inference.amortized.calibrate`)."""
-    import warnings
+def amortized_settings(args, settings):
+    """The emcee route's settings: minutes of budget unless ``--time-budget`` says
+    otherwise (the amortized posterior is the one used)."""
+    return settings.replace(time_budget=EMCEE_BUDGET) if args.time_budget is None else settings
 
-    from ..inference.amortized.calibrate import calibrate_amortized
 
+def report_amortized(args, res, drones, caught, cls) -> int:
+    """Write and report one drone's amortized calibration (``caught``: the warnings of
+    the run); the exit status."""
     if len(set(drones.tolist())) > 1:
         warn("calibrate", f"{args.measured} holds {len(set(drones.tolist()))} drones of {cls} (field 'specimen'); "
                           "they are calibrated as one drone: --specimen ID calibrates one of them")
-    if args.time_budget is None:  # the amortized posterior is the one used: the chain beside it gets minutes
-        settings = settings.replace(time_budget=EMCEE_BUDGET)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        res = calibrate_amortized(profiles, cls.upper(), acquisition=acquisition, estimator=args.estimator,
-                                  settings=settings, random_state=args.seed, route=args.route or "amortized",
-                                  source=str(args.measured))
     res.record_specimens(drones)
     res.save(args.out)
     result(res.report())

@@ -97,8 +97,7 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
         diag.update(converged=diag["emcee"]["converged"], reason=diag["emcee"]["reason"])
     if diag["out_of_range"]:
         warnings.warn(f"{source}: {diag['out_of_range_why']}", stacklevel=2)
-    return _result(ref, est, data, shifts, acquisition, radar, chosen, x_emcee if route == "amortized" else
-                   x_amortized, diag, n_draws)
+    return _result(ref, est, data, shifts, chosen, x_emcee if route == "amortized" else x_amortized, diag, n_draws)
 
 
 def _estimator_info(est) -> dict:
@@ -154,7 +153,9 @@ def _group(x: np.ndarray, e: int) -> dict:
     return {name: xe[None, :, :, IDX[name]] for name in ("Gamma",) + SHARED}
 
 
-def _result(ref, est, data, shifts, acquisition, radar, chosen, other, diag, n_draws) -> CalibrationResult:
+def _result(ref, est, data, shifts, chosen, other, diag, n_draws) -> CalibrationResult:
+    """The result's file: its acquisition and radar are the estimator's (the data's, as
+    ``check_data`` found them: it refuses any field that differs)."""
     import xarray as xr
 
     az = import_arviz()
@@ -169,7 +170,7 @@ def _result(ref, est, data, shifts, acquisition, radar, chosen, other, diag, n_d
     median = np.median(chosen, axis=0)
     meta = {"format": FORMAT, "class_name": ref.name, "n_engines": e, "n_measurements": int(len(data)),
             "settings": {"route": diag["route"], "n_draws": int(n_draws)}, "priors": est.priors.to_dict(),
-            "radar": radar.to_dict(), "acquisition": acquisition.to_dict(),
+            "radar": est.spec.radar.to_dict(), "acquisition": est.spec.acquisition.to_dict(),
             "likelihood": {"likelihood": "simulation-based (amortized posterior; learned likelihood for emcee)"},
             "marginal": True, "amortized": True,
             "fit": diag.get("emcee", {}).get("fit", {}), "best_fit": median.tolist(),
