@@ -84,7 +84,7 @@ def check_study_ramps(cfg) -> None:
     frames = 11
     acquisitions = sum(s.n_calibration + s.n_select + n * (1 + s.large_factor) for n in s.n_new.values())
     rendered = len(cfg.classes) * (p.cnn_n_per_class + p.sweep_n_per_class * len(p.sigma_p))
-    check_size(("--ramps", s.ramps, 32), seconds_each=acquisitions * frames * SECONDS_SCENE_RAMP
+    check_size(("--ramps", cfg.scene_ramps, 32), seconds_each=acquisitions * frames * SECONDS_SCENE_RAMP
                + rendered * SECONDS_FAST_RAMP, what="ramps per frame")
 
 
@@ -130,14 +130,10 @@ def run_study(args) -> int:
         cfg.device = args.device
     if args.quick:
         cfg = cfg.quick_version()
-    if args.ramps is not None:
-        if not cfg.simulated:
-            raise ValueError("--ramps sets the simulated campaign's ramps; with measured files use the config's "
-                             "protocol.acquisition_ramps (or the files' ramps_per_frame)")
-        import dataclasses
-
-        cfg.simulation = dataclasses.replace(cfg.simulation, ramps=args.ramps)
-        check_study_ramps(cfg)
+    if args.ramps is not None:  # the config's ramps: the simulated scene's K, or that of files that do not say it
+        cfg.ramps = args.ramps
+        if cfg.simulated:
+            check_study_ramps(cfg)
     cfg.validate()  # everything checked before the output folder exists
     from .study_sizes import check_study_sizes
 
@@ -186,8 +182,9 @@ def add_run(sub, parents, help):
                    help="when --out holds another study (other data, seed, classes or scene), remove its files "
                         "and run this one (default: refuse; the same study always resumes)")
     p.add_argument("--ramps", type=positive_int, default=None, metavar="K",
-                   help="ramps per frame of the simulated campaign (default: the config's, 32; 4 gives the "
-                        "4-ramp campaign)")
+                   help="the study's K, ramps per frame: of the simulated campaign (default: the config's, 32; 4 "
+                        "gives the 4-ramp campaign), or of measured files that do not state ramps_per_frame (one "
+                        "that states another K is refused)")
     p.add_argument("--seed", type=seed_int, default=None, help="the study's one seed (default: the config's, 0)")
     p.add_argument("--workers", type=positive_int, default=None, metavar="N",
                    help="local worker processes for independent jobs: the classes' calibrations, the strategies' "

@@ -20,7 +20,7 @@ MAX_ENGINES = 4    # QUAD
 def _ramps(cfg) -> tuple[str, int]:
     """(name, K) of the study's ramps per frame: the simulation's, or what its files state."""
     if cfg.simulated:
-        return "[simulation] ramps", cfg.simulation.ramps
+        return "ramps", cfg.scene_ramps
     from ..generator.acquisition import acquisition_from_file
     from ..radar import load_profiles
 
@@ -29,7 +29,7 @@ def _ramps(cfg) -> tuple[str, int]:
             acq = acquisition_from_file(load_profiles(path).extra, str(path))  # inf, nan: refused by name
             if acq is not None:
                 return f"{path}: field 'ramps_per_frame'", acq.ramps
-    return "[protocol] acquisition_ramps", cfg.protocol.acquisition_ramps or 1
+    return "ramps", cfg.ramps or 1
 
 
 def _measurements(cfg) -> list[tuple[str, int]]:
@@ -89,14 +89,15 @@ def _check(cfg) -> None:
                    (key("protocol", epochs_name), getattr(p, epochs_name), 40),
                    (key("protocol", "cnn_seeds"), p.cnn_seeds, 3),
                    seconds_each=n_cls * strategies * SECONDS_CNN_PROFILE, what="CNN profile passes")
-    evaluation = MAX_ENGINES * SECONDS_LIKELIHOOD_RAMP * p.calibration_draws * p.calibration_ramps_drawn
+    c = p.calibration
+    evaluation = MAX_ENGINES * SECONDS_LIKELIHOOD_RAMP * c.n_acquisitions * c.ramps_drawn
     for m_name, m in _measurements(cfg):
         measurements = (m_name, m, 5)
         walkers = 2 * (13 * MAX_ENGINES + 3 * m) + 2
-        check_size(measurements, (key("protocol", "calibration_max_steps"), p.calibration_max_steps, 400),
+        check_size(measurements, (key("protocol.calibration", "max_steps"), c.max_steps, 400),
                    seconds_each=n_cls * walkers * evaluation, what="likelihood evaluations of the calibration")
-        check_size(measurements, (key("protocol", "calibration_starts"), p.calibration_starts, 2),
-                   (key("protocol", "calibration_fit_budget"), p.calibration_fit_budget, 1500),
+        check_size(measurements, (key("protocol.calibration", "n_starts"), c.n_starts, 2),
+                   (key("protocol.calibration", "fit_budget"), c.fit_budget, 1500),
                    seconds_each=n_cls * evaluation, what="likelihood evaluations of the fit")
     n_test = sum(s.n_new.values()) * (1 + s.large_factor) if cfg.simulated else 10 ** 4
     check_size((key("protocol", "n_boot"), p.n_boot, 1000), seconds_each=n_test * strategies * p.cnn_seeds

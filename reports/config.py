@@ -5,6 +5,7 @@ Example ``study.toml``::
 
     seed = 3
     classes = ["HELI", "QUAD"]
+    ramps = 32                  # K; for measured files, only those that do not say ramps_per_frame
 
     [data]                      # omit for the embedded simulated scene
     calibration = { HELI = "old_heli.npz", QUAD = "old_quad.mat" }
@@ -13,12 +14,16 @@ Example ``study.toml``::
 
     [protocol]
     sigma_p = [0.0, 0.1, 0.2, 0.3]
-    acquisition_ramps = 32      # when the files do not say ramps_per_frame
     cnn_n_per_class = 16000
     cnn_seeds = 3
 
-The simulated default is a 32-ramp campaign (``[simulation] ramps = 4`` or
-``mdaug run --ramps 4`` gives the 4-ramp one).
+    [protocol.calibration]      # CalibrationSettings under their own names
+    max_steps = 800
+
+The simulated default is a 32-ramp campaign (``ramps = 4`` or ``mdaug run --ramps 4``
+gives the 4-ramp one). Keys renamed since 0.1 (``[simulation] ramps``, ``[protocol]
+acquisition_ramps``, ``[protocol] calibration_*``) are refused with their new names
+(:data:`RENAMED`).
 """
 from __future__ import annotations
 
@@ -54,7 +59,6 @@ class DataConfig:
 class SimulationConfig:
     """The embedded default scene (used when no measured files are given)."""
 
-    ramps: int = 32                 # ramps per frame of every simulated acquisition (K)
     calibration_drones: int = 1     # drones per class calibrated on: 1 = the reference drone itself (the
     #                                 population's spreads then assumed); more = drones of the specimen model,
     #                                 and one more drone, held out whole, that the choices are made on
@@ -67,14 +71,53 @@ class SimulationConfig:
     ceiling_per_class: int = 3000   # simulator-trained classifiers (separability ceiling), the CNN included
 
 
-CALIBRATION_SETTINGS = {"calibration_max_steps": ("emcee", "max_steps"), "calibration_time_budget": "time_budget",
-                        "calibration_starts": "n_starts", "calibration_fit_budget": "fit_budget",
-                        "calibration_draws": "n_acquisitions", "calibration_ramps_drawn": "ramps_drawn"}
-"""The protocol's calibration fields (their names in a study TOML and in results.json) ->
-the :class:`~mdaug.inference.settings.CalibrationSettings` knob each sets: a shared
-setting, or (plugin, knob) of a sampler plugin. Their defaults differ from a lone
-calibration's (a step cap per class, so the same command gives the same numbers); their
-ranges are the settings' own."""
+SCENE_RAMPS = 32
+"""K of the simulated scene when the study does not set ``ramps``."""
+
+
+@dataclass
+class CalibrationProtocol:
+    """``[protocol.calibration]``: how the study calibrates each class.
+
+    ``method``: ``amortized`` (the shipped estimator), ``likelihood`` (closed form), or
+    ``auto``: amortized for measured acquisitions where an estimator ships for the class
+    and K. Every other key is a :class:`~mdaug.inference.settings.CalibrationSettings`
+    setting under its own name (``max_steps`` is the emcee plugin's knob), with the
+    settings' own ranges. The defaults differ from a lone calibration's: a step cap
+    per class, so the same command gives the same numbers however busy the machine
+    (the run is flagged not converged when it ends before 50 tau), and an optional
+    time budget on top."""
+
+    method: str = "auto"
+    max_steps: int = 400
+    time_budget: float | None = None
+    n_starts: int = 2
+    fit_budget: int = 1500
+    n_acquisitions: int = 16
+    ramps_drawn: int = 16
+
+    def settings(self, quick: bool = False):
+        """The :class:`~mdaug.inference.settings.CalibrationSettings` of the study
+        (``CalibrationSettings.quick()`` based when ``quick``) with these settings; the
+        emcee plugin's blocks no longer than its step cap."""
+        from ..inference.settings import CalibrationSettings
+
+        base = CalibrationSettings.quick() if quick else CalibrationSettings()
+        knobs = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "method"}
+        return base.replace(**knobs).with_plugin("emcee", check_every=min(base.of("emcee").check_every,
+                                                                          self.max_steps))
+
+
+RENAMED = {("simulation", "ramps"): "ramps (top level)", ("protocol", "acquisition_ramps"): "ramps (top level)",
+           ("protocol", "calibration_method"): "method in [protocol.calibration]",
+           ("protocol", "calibration_max_steps"): "max_steps in [protocol.calibration]",
+           ("protocol", "calibration_time_budget"): "time_budget in [protocol.calibration]",
+           ("protocol", "calibration_starts"): "n_starts in [protocol.calibration]",
+           ("protocol", "calibration_fit_budget"): "fit_budget in [protocol.calibration]",
+           ("protocol", "calibration_draws"): "n_acquisitions in [protocol.calibration]",
+           ("protocol", "calibration_ramps_drawn"): "ramps_drawn in [protocol.calibration]"}
+"""Keys of 0.1 study configs -> where they live now (the value means the same): K is one
+setting, and the calibration's settings go by their own names."""
 
 
 @dataclass
@@ -96,42 +139,19 @@ class ProtocolConfig:
     tsaug_n_per_class: int = 3000
     tsaug_epochs: int = 60
     strategies: tuple[str, ...] = STRATEGIES
-    acquisition_ramps: int | None = None  # measured files that do not say ramps_per_frame: their K
     through_chain: bool = False     # render model-based training sets through the scene + radar chain
     normalisation: str = "peak"
     n_boot: int = 1000
-    # calibration: the phases marginalised under the campaign's acquisition; a step cap per
-    # class, so the same command gives the same numbers however busy the machine (the run is flagged
-    # not converged when it ends before 50 tau), and an optional time budget on top
-    calibration_method: str = "auto"  # amortized (the shipped estimator), likelihood (closed form), auto: amortized
-    #                                    for measured acquisitions where an estimator ships for the class and K
-    calibration_max_steps: int = 400
-    calibration_time_budget: float | None = None
-    calibration_starts: int = 2
-    calibration_fit_budget: int = 1500
-    calibration_draws: int = 16
-    calibration_ramps_drawn: int = 16
-
-    def calibration_settings(self, quick: bool = False):
-        """The calibration's settings (``CalibrationSettings.quick()`` based when ``quick``)
-        with this protocol's fields (:data:`CALIBRATION_SETTINGS`); the emcee plugin's
-        blocks no longer than its step cap."""
-        from ..inference.settings import CalibrationSettings
-
-        base = CalibrationSettings.quick() if quick else CalibrationSettings()
-        settings = base.replace(**{knob: getattr(self, name) for name, knob in CALIBRATION_SETTINGS.items()
-                                   if isinstance(knob, str)})
-        for name, knob in CALIBRATION_SETTINGS.items():
-            if not isinstance(knob, str):
-                settings = settings.with_plugin(knob[0], **{knob[1]: getattr(self, name)})
-        emcee = base.of("emcee")
-        return settings.with_plugin("emcee", check_every=min(emcee.check_every, self.calibration_max_steps))
+    calibration: CalibrationProtocol = field(default_factory=CalibrationProtocol)
 
 
 @dataclass
 class StudyConfig:
     seed: int = 0
     classes: tuple[str, ...] = ("HELI", "QUAD")
+    # K, the ramps averaged per frame (ramps_per_frame): of the simulated scene (None: SCENE_RAMPS), or, with
+    # measured files, of those that do not state it (None: 1); a file stating another K is refused
+    ramps: int | None = None
     quick: bool = False
     workers: int = 2                # local worker processes (the classes' calibrations, the strategies' CNNs)
     scheduler: str | None = None
@@ -145,6 +165,11 @@ class StudyConfig:
     def simulated(self) -> bool:
         return not self.data.test
 
+    @property
+    def scene_ramps(self) -> int:
+        """K of the simulated scene."""
+        return self.ramps or SCENE_RAMPS
+
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
@@ -153,11 +178,12 @@ class StudyConfig:
         p = dataclasses.replace(
             self.protocol, sigma_p=(0.0, 0.2), specimen_widths=(1.0,), models=("nb", "xgb"), sweep_n_per_class=200,
             cnn_n_per_class=600, cnn_epochs=8, cnn_patience=4, tsaug_n_per_class=300, tsaug_epochs=8, n_boot=200,
-            calibration_max_steps=60, calibration_starts=1, calibration_fit_budget=200, calibration_draws=6,
-            calibration_ramps_drawn=2)
-        s = dataclasses.replace(self.simulation, ramps=4, n_calibration=3, n_select=6, n_new={c: 24 for c in self.classes},
+            calibration=dataclasses.replace(self.protocol.calibration, max_steps=60, n_starts=1, fit_budget=200,
+                                            n_acquisitions=6, ramps_drawn=2))
+        s = dataclasses.replace(self.simulation, n_calibration=3, n_select=6, n_new={c: 24 for c in self.classes},
                                 new_specimens=2, large_factor=1, ceiling_per_class=80)
-        return dataclasses.replace(self, quick=True, protocol=p, simulation=s)
+        return dataclasses.replace(self, quick=True, protocol=p, simulation=s,
+                                   ramps=4 if self.simulated else self.ramps)
 
     def validate(self, check_files: bool = True) -> "StudyConfig":
         """Fail before any work: wrong types, unknown classes or names, bad sizes,
@@ -199,19 +225,19 @@ class StudyConfig:
         if self.data.calibration and not self.data.test:
             raise ValueError(f"{src}: data.calibration is given but data.test is not: give both, or neither "
                              "(the embedded simulated scene)")
+        if self.ramps is not None and self.ramps < 1:
+            raise ValueError(f"{src}: ramps = {self.ramps}: expected an integer >= 1 (leave it out for "
+                             f"{SCENE_RAMPS} simulated, or the files' ramps_per_frame)")
         p = self.protocol
-        if p.acquisition_ramps is not None and p.acquisition_ramps < 1:
-            raise ValueError(f"{src}: protocol.acquisition_ramps must be >= 1 (leave it out to use the files')")
         bad = [w for w in p.specimen_widths if not w >= 0]
         if bad or not p.specimen_widths:
             raise ValueError(f"{src}: protocol.specimen_widths must be a non-empty list of numbers >= 0, "
                              f"got {p.specimen_widths}")
-        try:  # the calibration fields' ranges are the settings' own
-            p.calibration_settings()
+        try:  # the calibration's ranges are the settings' own
+            p.calibration.settings()
         except ValueError as exc:
-            named = [name for name, knob in CALIBRATION_SETTINGS.items()
-                     if (knob if isinstance(knob, str) else knob[1]) in str(exc)]
-            raise ValueError(f"{src}: protocol.{named[0] if named else 'calibration'}: {exc}") from None
+            named = [f.name for f in dataclasses.fields(p.calibration) if f.name in str(exc)]
+            raise ValueError(f"{src}: protocol.calibration{'.' + named[0] if named else ''}: {exc}") from None
         bad = [s for s in p.sigma_p if not 0 <= s <= 1]
         if bad or not p.sigma_p:
             raise ValueError(f"{src}: protocol.sigma_p must be a non-empty list in [0, 1], got {p.sigma_p}")
@@ -221,7 +247,7 @@ class StudyConfig:
                      "tsaug_epochs"):
             if getattr(p, name) < 1:
                 raise ValueError(f"{src}: protocol.{name} must be >= 1")
-        _check_names(src, "protocol.calibration_method", (p.calibration_method,), ("auto", "amortized", "likelihood"))
+        _check_names(src, "protocol.calibration.method", (p.calibration.method,), ("auto", "amortized", "likelihood"))
         _check_names(src, "protocol.models", p.models, ("svm", "nb", "xgb", "cnn"))
         _check_names(src, "protocol.normalisation", (p.normalisation,), NORMALISATIONS)
         from ..classify.base import PRECISIONS
@@ -233,7 +259,7 @@ class StudyConfig:
         if p.n_boot < 0:
             raise ValueError(f"{src}: protocol.n_boot must be >= 0")
         sim = self.simulation
-        for name in ("ramps", "calibration_drones", "n_calibration", "n_select", "new_specimens", "large_factor",
+        for name in ("calibration_drones", "n_calibration", "n_select", "new_specimens", "large_factor",
                      "ceiling_per_class"):
             if getattr(sim, name) < 1:
                 raise ValueError(f"{src}: simulation.{name} must be >= 1")
@@ -294,16 +320,28 @@ SECTIONS = ("data", "protocol", "simulation")
 
 def _section(cls, table, path, section: str | None):
     """A config dataclass from one TOML table, every value type-checked against the
-    dataclass's annotations (messages name the file, the section and the key)."""
+    dataclass's annotations (messages name the file, the section and the key); a table
+    of a dataclass field (``[protocol.calibration]``) is read the same way; a key of an
+    older config is refused with its new place (:data:`RENAMED`)."""
     where = f"{path} [{section}]" if section else str(path)
     if not isinstance(table, dict):
         raise ValueError(f"{path}: {section} = {table!r}: expected a table ([{section}] section)")
+    prefix = f"{path}: [{section}] " if section else f"{path}: "
+    for key in table:
+        if (section, key) in RENAMED:
+            raise ValueError(f"{prefix}{key}: renamed; write it as {RENAMED[section, key]} (same meaning; "
+                             "docs/cli.md, study configs)")
     types = {k: v for k, v in field_types(cls).items() if k not in SECTIONS + ("source",)}
     unknown = sorted(set(table) - set(types))
     if unknown:
         raise ValueError(f"{where}: unknown key(s) {unknown}; known: {sorted(types)}")
-    prefix = f"{path}: [{section}] " if section else f"{path}: "
-    return cls(**{k: convert(v, types[k], f"{prefix}{k}") for k, v in table.items()})
+
+    def value(k, v):
+        if dataclasses.is_dataclass(types[k]) and isinstance(v, dict):
+            return _section(types[k], v, path, f"{section}.{k}" if section else k)
+        return convert(v, types[k], f"{prefix}{k}")
+
+    return cls(**{k: value(k, v) for k, v in table.items()})
 
 
 def load_config(path) -> StudyConfig:

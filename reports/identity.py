@@ -20,18 +20,23 @@ from .cache import settings_key
 STUDY_FILES = ("report.html", "results.json", "stages/", "data/", "posteriors/", "models/", "figures/")
 """What a study writes in its folder (subfolders end in /)."""
 IDENTITY = "study.json"
-PARTS = ("seed", "classes", "data", "simulation", "acquisition_ramps")
+PARTS = ("seed", "classes", "data", "simulation", "ramps")
 
 
 def _parts(cfg) -> dict:
     c = cfg.to_dict()
     return {"seed": c["seed"], "classes": c["classes"], "data": c["data"], "simulation": c["simulation"],
-            "acquisition_ramps": c["protocol"]["acquisition_ramps"]}
+            "ramps": cfg.scene_ramps if cfg.simulated else cfg.ramps}
 
 
 def study_key(cfg) -> str:
-    """The study's identity: the key of its data (and of its ``data`` stage)."""
-    return settings_key(*_parts(cfg).values())
+    """The study's identity: the key of its data (and of its ``data`` stage). Hashed as
+    mdaug 0.1 hashed it, when K was two settings (``[simulation] ramps``, 4 under
+    ``--quick``, and ``[protocol] acquisition_ramps``), so a study folder of 0.1 resumes."""
+    p = _parts(cfg)
+    scene = cfg.scene_ramps if cfg.simulated else (4 if cfg.quick else 32)
+    return settings_key(p["seed"], p["classes"], p["data"], {"ramps": scene, **p["simulation"]},
+                        None if cfg.simulated else cfg.ramps)
 
 
 def _stored(out: Path) -> tuple[str | None, dict]:
@@ -60,7 +65,7 @@ def check_study_folder(out, cfg, overwrite: bool = False) -> bool:
     parts = record.get("parts") or {}
     mine = json.loads(json.dumps(_parts(cfg)))
     differ = [p for p in PARTS if p in parts and parts[p] != mine[p]] or ["its data"]
-    shown = ", ".join(f"{p} {parts[p]!r} -> {mine[p]!r}" if p in ("seed", "classes", "acquisition_ramps") else p
+    shown = ", ".join(f"{p} {parts[p]!r} -> {mine[p]!r}" if p in ("seed", "classes", "ramps") else p
                       for p in differ if p in parts) or "its data"
     raise ValueError(f"{out}: --out holds another study (made from {record.get('config', 'another config')}; this run: "
                      f"{cfg.source}; differs in {shown}): choose another --out folder, or give --overwrite to "

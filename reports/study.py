@@ -6,7 +6,7 @@ Stages (each cached in ``DIR/stages`` so an interrupted run resumes):
    class-reference drones (``calibration_<CLASS>``: the acquisitions calibrated on;
    ``select``: more of them, held out for the study's choices), a campaign of new
    drone specimens (``new``) and a larger one (``new_large``); every acquisition
-   averages ``simulation.ramps`` ramps and goes through the radar chain. Or the
+   averages ``ramps`` ramps and goes through the radar chain. Or the
    files of a study config.
 2. ``calibrate_<CLASS>``: each class calibrated from its measurements under the
    campaign's acquisition (the phases marginalised; :mod:`mdaug.inference`).
@@ -76,7 +76,7 @@ class Study(TrainingStages):
         claim(self.out, cfg)
         c, p = cfg.to_dict(), cfg.to_dict()["protocol"]
         self.key = study_key(cfg)
-        self.calib_key = settings_key(self.key, c["quick"], {k: v for k, v in p.items() if k.startswith("calibration")})
+        self.calib_key = settings_key(self.key, c["quick"], p["calibration"])
         self.cand_key = settings_key(self.calib_key, [p[k] for k in ("sigma_p", "specimen_widths", "models",
                                                                      "sweep_n_per_class", "strategies",
                                                                      "through_chain", "normalisation", "n_boot")])
@@ -123,11 +123,11 @@ class Study(TrainingStages):
         from ..generator.acquisition import resolve_acquisition
 
         stated = [(p, a) for p, a in acqs if a is not None]
-        k = self.cfg.protocol.acquisition_ramps
+        k = self.cfg.ramps
         given = None if k is None else Acquisition.measured(k)
         for (p1, a1) in stated:  # the one file-against-setting rule: every file against the first, and the config
             resolve_acquisition(a1, stated[0][1], str(p1), str(stated[0][0]))
-            resolve_acquisition(a1, given, str(p1), f"{self.cfg.source}: protocol.acquisition_ramps")
+            resolve_acquisition(a1, given, str(p1), f"{self.cfg.source}: ramps (or --ramps)")
         acq = stated[0][1] if stated else Acquisition.measured(k or 1)
         return sets, acq
 
@@ -136,7 +136,7 @@ class Study(TrainingStages):
         from ..generator.specimens import SpecimenSpread
 
         sim = self.cfg.simulation
-        scene = SceneConfig().with_acquisition(ramps=sim.ramps)
+        scene = SceneConfig().with_acquisition(ramps=self.cfg.scene_ramps)
         reference = scene.replace(specimens=SpecimenSpread.exact())
         d = sim.calibration_drones
         # 1 drone: the reference drone itself, its other acquisitions held out for the choices; more:
@@ -212,18 +212,18 @@ class Study(TrainingStages):
 
     # ---- stage 2: calibration --------------------------------------------------------
     def _calibration_job(self, cls: str, acquisition) -> dict:
-        settings = self.cfg.protocol.calibration_settings(self.cfg.quick)
+        settings = self.cfg.protocol.calibration.settings(self.cfg.quick)
         return {"cls": cls, "method": self.calibration_method(cls, acquisition),
                 "profiles": self.load_set(f"calibration_{cls}")[0],
                 "drones": self.load_drones(f"calibration_{cls}", cls), "acquisition": acquisition,
                 "settings": settings, "seed": _stage_seed(self.cfg, "calibrate", cls), "out": str(self.out)}
 
     def calibration_method(self, cls: str, acquisition) -> str:
-        """'amortized' or 'likelihood' (protocol.calibration_method; auto: amortized for a
+        """'amortized' or 'likelihood' (protocol.calibration.method; auto: amortized for a
         measured acquisition when an estimator ships for the class and K)."""
         from ..inference.amortized.shipped import shipped_path
 
-        method = self.cfg.protocol.calibration_method
+        method = self.cfg.protocol.calibration.method
         if method == "auto":
             ok = acquisition.phases == "uniform" and shipped_path(cls, acquisition.ramps).is_file()
             method = "amortized" if ok else "likelihood"

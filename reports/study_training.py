@@ -85,7 +85,7 @@ class TrainingStages:
             fits += [(model, seed, params)
                      for seed in run_seeds(first, self.cfg.seed, p.cnn_seeds if model == "cnn" else 1, "ceiling", model)]
         return {"kind": "ceiling", "stage": "ceiling", "seed": self.cfg.seed, "classes": list(self.cfg.classes),
-                "ramps": sim.ramps, "n_specimens": 2 * sim.new_specimens, "per_class": sim.ceiling_per_class,
+                "ramps": self.cfg.scene_ramps, "n_specimens": 2 * sim.new_specimens, "per_class": sim.ceiling_per_class,
                 "tests": {sel_name: sel_data, **tests}, "fits": fits,
                 "key": settings_key(self.key, sim.ceiling_per_class, p.cnn_seeds, p.cnn_epochs, p.cnn_patience,
                                     p.cnn_precision),

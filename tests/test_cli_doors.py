@@ -107,15 +107,15 @@ def root(tmp_path_factory):
     for name, text in {"ceiling": f"[simulation]\nceiling_per_class = {big}\n",
                        "drones": f"[simulation]\ncalibration_drones = {big}\n",
                        "n_new": f"[simulation]\nn_new = {{ HELI = {big}, QUAD = 5 }}\n",
-                       "sim_ramps": f"[simulation]\nramps = {big}\n",
+                       "sim_ramps": f"ramps = {big}\n",
                        "specimens": f"[simulation]\nnew_specimens = {big}\n",
                        "cnn_n": f"[protocol]\ncnn_n_per_class = {big}\n",
                        "epochs": f"[protocol]\ncnn_epochs = {big}\n",
                        "n_boot": f"[protocol]\nn_boot = {big}\n",
-                       "steps": f"[protocol]\ncalibration_max_steps = {big}\n",
+                       "steps": f"[protocol.calibration]\nmax_steps = {big}\n",
                        "sweep": f"[protocol]\nsweep_n_per_class = {big}\n"}.items():
         (d / f"size_{name}.toml").write_text(text)
-    _config(d, "size_measured_steps.toml", extra=f"[protocol]\ncalibration_max_steps = {big}\n")
+    _config(d, "size_measured_steps.toml", extra=f"[protocol.calibration]\nmax_steps = {big}\n")
     # ---- population files ----
     _save_population(d / "pop.npz")
     _save_population(d / "pop_no_mu.npz", edit=lambda a: _drop(a, "mu"))
@@ -200,15 +200,15 @@ CASES = [
                                                  "1,000,000,000,000"]),
     ("size-drones", _run("size_drones.toml"), ["size_drones.toml: [simulation] calibration_drones"]),
     ("size-n-new", _run("size_n_new.toml"), ["size_n_new.toml: [simulation] n_new.HELI 1,000,000,000,000"]),
-    ("size-ramps", _run("size_sim_ramps.toml"), ["size_sim_ramps.toml: [simulation] ramps 1,000,000,000,000"]),
+    ("size-ramps", _run("size_sim_ramps.toml"), ["size_sim_ramps.toml: ramps 1,000,000,000,000"]),
     ("size-specimens", _run("size_specimens.toml"), ["size_specimens.toml: [simulation] new_specimens"]),
     ("size-cnn-n", _run("size_cnn_n.toml"), ["size_cnn_n.toml: [protocol] cnn_n_per_class 1,000,000,000,000"]),
     ("size-epochs", _run("size_epochs.toml"), ["size_epochs.toml: [protocol] cnn_epochs 1,000,000,000,000"]),
     ("size-n-boot", _run("size_n_boot.toml"), ["size_n_boot.toml: [protocol] n_boot 1,000,000,000,000"]),
-    ("size-steps", _run("size_steps.toml"), ["size_steps.toml: [protocol] calibration_max_steps"]),
+    ("size-steps", _run("size_steps.toml"), ["size_steps.toml: [protocol.calibration] max_steps"]),
     ("size-sweep", _run("size_sweep.toml"), ["size_sweep.toml: [protocol] sweep_n_per_class"]),
-    ("size-steps-measured", _run("size_measured_steps.toml"), ["size_measured_steps.toml: [protocol] "
-                                                               "calibration_max_steps"]),
+    ("size-steps-measured", _run("size_measured_steps.toml"), ["size_measured_steps.toml: "
+                                                               "[protocol.calibration] max_steps"]),
     # ---- population files: the checked NPZ reader ----
     ("pop-missing-field", [*AUG, "HELI={d}/pop_no_mu.npz"], ["pop_no_mu.npz: not a population file", "'mu'"]),
     ("pop-no-diagnostics", [*AUG, "HELI={d}/pop_no_diag.npz"], ["pop_no_diag.npz: field 'meta' lacks",

@@ -78,25 +78,47 @@ def test_stage_cache_resumes_and_recomputes_on_a_new_key(tmp_path):
     assert len(calls) == 2
 
 
-def test_the_protocol_sets_the_calibration_settings_it_names(tmp_path):
-    """The protocol's calibration fields are calibration settings under their study
-    names (reports.config.CALIBRATION_SETTINGS): each reaches the setting it names, the
-    emcee blocks are no longer than the step cap, and a bad value is refused by the
-    settings' own rule, named by the protocol field."""
+def test_the_protocols_calibration_table_sets_the_settings_it_names(tmp_path):
+    """[protocol.calibration] holds CalibrationSettings under their own names: each
+    reaches the setting it names (max_steps the emcee plugin's), the emcee blocks are no
+    longer than the step cap, a bad value is refused by the settings' own rule, named by
+    its key, and a key of a 0.1 config is refused with its new place."""
     from mdaug.inference.settings import CalibrationSettings
-    from mdaug.reports.config import CALIBRATION_SETTINGS, ProtocolConfig
+    from mdaug.reports.config import CalibrationProtocol
 
-    p = ProtocolConfig(calibration_max_steps=120, calibration_time_budget=30.0, calibration_starts=3,
-                       calibration_fit_budget=700, calibration_draws=5, calibration_ramps_drawn=2)
-    s = p.calibration_settings()
-    assert s == CalibrationSettings(time_budget=30.0, n_starts=3, fit_budget=700, n_acquisitions=5, ramps_drawn=2,
-                                    max_steps=120, check_every=120)
-    named = {f for f in vars(p) if f.startswith("calibration_") and f != "calibration_method"}
-    assert set(CALIBRATION_SETTINGS) == named
-    q = p.calibration_settings(quick=True)
+    cfg = load_config(_write(tmp_path / "c.toml", "[protocol.calibration]\nmax_steps = 120\ntime_budget = 30\n"
+                                                  "n_starts = 3\nfit_budget = 700\nn_acquisitions = 5\n"
+                                                  "ramps_drawn = 2\nmethod = \"likelihood\"\n"))
+    c = cfg.protocol.calibration
+    assert c == CalibrationProtocol("likelihood", 120, 30.0, 3, 700, 5, 2)
+    assert c.settings() == CalibrationSettings(time_budget=30.0, n_starts=3, fit_budget=700, n_acquisitions=5,
+                                               ramps_drawn=2, max_steps=120, check_every=120)
+    q = c.settings(quick=True)
     assert q.of("emcee").n_walkers == CalibrationSettings.quick().of("emcee").n_walkers and q.n_starts == 3
-    for line, field in (("calibration_draws = 1", "calibration_draws"),
-                        ("calibration_max_steps = 0", "calibration_max_steps"),
-                        ("calibration_time_budget = -1.0", "calibration_time_budget")):
-        with pytest.raises(ValueError, match=f"protocol.{field}: "):
-            load_config(_write(tmp_path / "p.toml", f"[protocol]\n{line}\n"))
+    for line, key in (("n_acquisitions = 1", "n_acquisitions"), ("max_steps = 0", "max_steps"),
+                      ("time_budget = -1.0", "time_budget")):
+        with pytest.raises(ValueError, match=f"protocol.calibration.{key}: "):
+            load_config(_write(tmp_path / "p.toml", f"[protocol.calibration]\n{line}\n"))
+    with pytest.raises(ValueError, match=r"\[protocol.calibration\] max_steps = 'many': expected an integer"):
+        load_config(_write(tmp_path / "t.toml", "[protocol.calibration]\nmax_steps = \"many\"\n"))
+    with pytest.raises(ValueError, match=r"\[protocol.calibration\]: unknown key\(s\) \['n_walker'\]"):
+        load_config(_write(tmp_path / "u.toml", "[protocol.calibration]\nn_walker = 8\n"))
+    for old, new in (("[protocol]\ncalibration_draws = 5", r"n_acquisitions in \[protocol.calibration\]"),
+                     ("[protocol]\ncalibration_max_steps = 5", r"max_steps in \[protocol.calibration\]"),
+                     ("[simulation]\nramps = 4", r"ramps \(top level\)")):
+        with pytest.raises(ValueError, match=f"renamed; write it as {new}"):
+            load_config(_write(tmp_path / "o.toml", old + "\n"))
+
+
+def test_ramps_is_one_setting_for_the_scene_and_for_files_that_do_not_state_it(tmp_path):
+    """K: the simulated scene's (32 when left out, 4 in the quick study), or, with
+    measured files, that of files that do not state it; the study key of a 0.1 folder
+    (K in [simulation]) is the key of the same study today."""
+    from mdaug.reports.identity import study_key
+
+    assert StudyConfig().scene_ramps == 32 and StudyConfig(ramps=8).scene_ramps == 8
+    assert StudyConfig().quick_version().scene_ramps == 4
+    assert load_config(_write(tmp_path / "k.toml", "ramps = 8\n")).scene_ramps == 8
+    assert study_key(StudyConfig()) == "5c07c72e5a934bef"  # stages/study.json of a 0.1 default study
+    assert study_key(StudyConfig(ramps=32)) == study_key(StudyConfig())
+    assert study_key(StudyConfig(ramps=4)) != study_key(StudyConfig())

@@ -88,7 +88,7 @@ def test_quick_study_compares_every_strategy_with_intervals(quick_study):
     assert best["name"] == (best["tied"][0] if len(best["tied"]) == 1 else None)  # a tie is not broken
     assert {"data", "calibrate_HELI", "calibrate_QUAD", "cnn_posterior"} <= set(results["timings"])
     assert results["ceiling"]["models"]["xgb"]["tests"]["new"]["accuracy"] >= 0
-    assert results["acquisition"]["ramps"] == results["config"]["simulation"]["ramps"]
+    assert results["acquisition"]["ramps"] == results["config"]["ramps"]
     for cls in ("HELI", "QUAD"):
         assert results["calibration"][cls]["acquisition"]["ramps"] == results["acquisition"]["ramps"]
 
