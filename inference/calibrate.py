@@ -86,7 +86,8 @@ def make_likelihood(data: np.ndarray, ref: ClassParams, n_engines: int, acquisit
     layout = Layout(n_engines, data.shape[0], priors, settings.range_offset,
                     sigma_bounds=(settings.sigma_min, settings.sigma_max))
     return LogPosterior(data, layout, radar, normalisation=settings.normalisation, dtype=settings.dtype,
-                        sigma_bounds=(settings.sigma_min, settings.sigma_max), alignment=settings.alignment)
+                        sigma_bounds=(settings.sigma_min, settings.sigma_max), alignment=settings.alignment,
+                        acquisition=acquisition)
 
 
 def calibrate(profiles, reference, *, engines: int | None = None, acquisition: Acquisition | None = None,
@@ -118,7 +119,7 @@ def calibrate(profiles, reference, *, engines: int | None = None, acquisition: A
     lik_ss, run_ss = ss.spawn(2)
     post = make_likelihood(data, ref, n_eng, acquisition, settings, lik_ss, priors, radar)
     return run_calibration(post, ref, settings, run_ss, start_vector(ref, n_eng), backend_path=backend_path,
-                           shifts=shifts, acquisition=acquisition)
+                           shifts=shifts)
 
 
 def _fit_path(backend_path) -> Path | None:
@@ -140,20 +141,18 @@ def saved_fit(backend_path, fp: str) -> FitResult | None:
 
 
 def run_calibration(post, ref: ClassParams, settings: CalibrationSettings, ss: np.random.SeedSequence, start_x,
-                    *, backend_path=None, shifts=None, acquisition: Acquisition | None = None) -> CalibrationResult:
-    """Fit + sampler + packing for a prepared likelihood (also used by the
-    simulation-based calibration, which builds its own data). start_x: (13E,) vector
-    the first fit start begins at."""
+                    *, backend_path=None, shifts=None) -> CalibrationResult:
+    """Fit + sampler + packing for a prepared likelihood (its data, layout, radar and
+    acquisition are the result's). start_x: (13E,) vector the first fit start begins at."""
     from threadpoolctl import threadpool_limits
 
     layout, radar = post.layout, post.radar
     fit_ss, mc_ss = ss.spawn(2)
-    acquisition = acquisition if acquisition is not None else Acquisition()
     with threadpool_limits(settings.threads):
         key = settings.resume_key()  # a resumed run may have other budgets
         fp = fingerprint(post.data, text=json.dumps([ref.name, layout.E, layout.priors.to_dict(), key,
                                                      str(ss.entropy), list(ss.spawn_key), radar.to_dict(),
-                                                     acquisition.to_dict()], default=str))
+                                                     post.acquisition.to_dict()], default=str))
         fit = saved_fit(backend_path, fp)
         fit_reused = fit is not None
         if fit is None:
@@ -172,7 +171,7 @@ def run_calibration(post, ref: ClassParams, settings: CalibrationSettings, ss: n
         loglik = post.pointwise(theta)
     shifts = np.zeros(layout.M, int) if shifts is None else shifts
     return build_result(ref, layout, post, fit, run, theta, lp, loglik, settings, radar, shifts,
-                        acquisition=acquisition, fit_reused=fit_reused)
+                        fit_reused=fit_reused)
 
 
 def _diagnostics(layout: Layout, run: SamplerRun, fit, settings, fit_reused: bool) -> dict:
@@ -220,7 +219,7 @@ def _posterior_variables(layout: Layout, theta: np.ndarray):
 
 
 def build_result(ref, layout: Layout, post, fit, run: SamplerRun, theta, lp, loglik, settings, radar,
-                 shifts, *, acquisition: Acquisition, fit_reused: bool = False) -> CalibrationResult:
+                 shifts, *, fit_reused: bool = False) -> CalibrationResult:
     """Pack draws, diagnostics and metadata into an InferenceData (see :mod:`.result.posterior`).
     loglik: (n, M, L) per bin (fitted phases) or (n, M) per measurement (marginal)."""
     import xarray as xr
@@ -243,7 +242,7 @@ def build_result(ref, layout: Layout, post, fit, run: SamplerRun, theta, lp, log
     lik = post.settings() if layout.marginal else {"likelihood": "fitted phases"}
     meta = {"format": FORMAT, "class_name": ref.name, "n_engines": layout.E, "n_measurements": layout.M,
             "settings": settings.to_dict(), "priors": layout.priors.to_dict(), "radar": radar.to_dict(),
-            "acquisition": acquisition.to_dict(), "likelihood": lik, "marginal": bool(layout.marginal),
+            "acquisition": post.acquisition.to_dict(), "likelihood": lik, "marginal": bool(layout.marginal),
             "fit": fit.to_dict(), "best_fit": best_x[0, 0].tolist(), "theta_names": layout.theta_names(),
             "recentred_shifts": np.asarray(shifts).tolist(),
             "diagnostics": _diagnostics(layout, run, fit, settings, fit_reused), "noise_model": noise_model}

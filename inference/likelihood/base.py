@@ -51,6 +51,7 @@ class LogPosteriorBase:
     """log p(theta | data) up to a constant; see the module doc."""
 
     layout = None
+    acquisition = None  # the Acquisition the measurements were made under (the result records it)
     noise_model = ""  # one sentence for the posterior's metadata
     sigma_bounds = None  # the tail's bounds when they are not the layout's (fitted phases)
 

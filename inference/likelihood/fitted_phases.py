@@ -15,6 +15,7 @@ import numpy as np
 
 from ...generator import profiles as model_profiles
 from ...generator import spectra as model_spectra
+from ...generator.acquisition import Acquisition
 from ...radar import RadarConfig, normalise
 from .base import LogPosteriorBase
 from ..space.layout import Layout
@@ -26,15 +27,18 @@ ALIGNMENTS = ("tone", "peak")
 class LogPosterior(LogPosteriorBase):
     """log p(theta | data) for a batch of theta (W, dim); callable by emcee with vectorize=True.
 
-    data: (M, L) normalised measured profiles; layout: the :class:`Layout`.
+    data: (M, L) normalised measured profiles; layout: the :class:`Layout`;
+    acquisition: how they were measured (default the published single chirp; fixed
+    phases, one ramp, no MTI: the acquisitions this likelihood models).
     """
 
     noise_model = "Gaussian iid per bin on the normalised profile, sigma per measurement (log-uniform)"
 
     def __init__(self, data: np.ndarray, layout: Layout, radar: RadarConfig = RadarConfig(), *,
                  normalisation: str = "peak", dtype: str = "float32", sigma_bounds=(1e-4, 1.0),
-                 alignment: str = "tone"):
+                 alignment: str = "tone", acquisition: Acquisition = Acquisition()):
         self.data = np.asarray(data, dtype=np.float64)
+        self.acquisition = acquisition
         self.layout, self.radar, self.normalisation = layout, radar, normalisation
         self.dtype, self.sigma_bounds = dtype, tuple(sigma_bounds)
         self.n_bins = self.data.shape[1]
