@@ -33,11 +33,11 @@ threadpool_limits(1)
 
 from mdaug.classify import make_classifier, sigma_p_sweep  # noqa: E402
 from mdaug.cli.sweep import SyntheticTrainSet  # noqa: E402
-from mdaug.generator import Nuisance, SigmaPAugmenter, make_dataset  # noqa: E402
+from mdaug.generator import Acquisition, SigmaPAugmenter, make_dataset  # noqa: E402
 
 
-def synthetic(n_per_class, sigma_p=0.2, seed=0, nuisance=Nuisance()):
-    ds = make_dataset([SigmaPAugmenter(c, sigma_p, nuisance=nuisance) for c in ("HELI", "QUAD")],
+def synthetic(n_per_class, sigma_p=0.2, seed=0, acquisition=Acquisition()):
+    ds = make_dataset([SigmaPAugmenter(c, sigma_p, acquisition=acquisition) for c in ("HELI", "QUAD")],
                       n_per_class, seed, progress=False)
     return ds.profiles, ds.labels
 
@@ -115,9 +115,9 @@ def bench_speed_vs_error(quick):
 
 def bench_sweep(quick):
     n_per_class = 500 if quick else 4000
-    measured_like = Nuisance(phases="uniform", range_jitter_bins=1.0, n_ramps=4)
+    measured_like = Acquisition(phases="uniform", range_jitter_bins=1.0, ramps=4)
     tests = {"same": synthetic(68, 0.1, seed=7),
-             "uniform_phase": synthetic(68, 0.2, seed=8, nuisance=measured_like)}
+             "uniform_phase": synthetic(68, 0.2, seed=8, acquisition=measured_like)}
     make_train = SyntheticTrainSet(("HELI", "QUAD"), n_per_class)
     t0 = time.perf_counter()
     res = sigma_p_sweep(make_train, tests, random_state=0, progress=False)
