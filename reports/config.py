@@ -286,13 +286,18 @@ class StudyConfig:
         check_distinct(self.data.test, f"{src}: [data] test set names")
 
     def _check_files(self) -> None:
-        """Every data file readable, 400-bin, no all-zero rows, the right classes."""
+        """Every data file readable, 400-bin, no all-zero rows, the right classes, and
+        the K it states (if any) the study's ``ramps`` (the one file-against-setting rule)."""
+        from ..generator.acquisition import Acquisition, acquisition_from_file, resolve_acquisition
         from ..radar import RadarConfig, load_profiles
 
         length = RadarConfig().slice_length
+        given = None if self.ramps is None else Acquisition.measured(self.ramps)
         for group in ("calibration", "select", "test"):
             for name, path in getattr(self.data, group).items():
                 ps = load_profiles(path)  # errors name the file and field
+                resolve_acquisition(acquisition_from_file(ps.extra, path), given, str(path),
+                                    f"{self.source}: ramps (or --ramps)")
                 if ps.profiles.shape[1] != length:
                     raise ValueError(f"{self.source}: data.{group}.{name}: {path}: field 'profiles' has "
                                      f"{ps.profiles.shape[1]}-bin profiles; the study takes {length}-bin "

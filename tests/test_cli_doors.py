@@ -102,6 +102,9 @@ def root(tmp_path_factory):
     atomic_savez(d / "k_acq_inf.npz", profiles=x, labels=LABELS, acquisition=np.array('{"ramps": Infinity}'))
     atomic_savez(d / "k_acq_null.npz", profiles=x, labels=LABELS, acquisition=np.array('{"ramps": null}'))
     _config(d, "k_big.toml", {"new": "k_big.npz"})
+    atomic_savez(d / "k4.npz", profiles=x, labels=LABELS, ramps_per_frame=np.array(4))
+    _config(d, "k4.toml", {"new": "k4.npz"})
+    (d / "k8.toml").write_text("ramps = 8\n" + (d / "k4.toml").read_text())
     _config(d, "k_inf.toml", {"new": "k_inf.npz"})
     big = 10 ** 12
     for name, text in {"ceiling": f"[simulation]\nceiling_per_class = {big}\n",
@@ -195,6 +198,10 @@ CASES = [
     ("k-acquisition-null", ["calibrate", "{d}/k_acq_null.npz", "--class", "HELI", "--out", "{o}/p.nc"],
      ["k_acq_null.npz: field 'acquisition'"]),
     ("k-inf-study", _run("k_inf.toml"), ["k_inf.npz: field 'ramps_per_frame'"]),
+    ("k-file-against-config", _run("k8.toml"), ["k4.npz says 4 ramp(s) per frame but", "k8.toml: ramps (or --ramps) "
+                                                "says 8"]),
+    ("k-file-against-option", [*_run("k4.toml"), "--ramps", "8"], ["k4.npz says 4 ramp(s) per frame but",
+                                                                   "k4.toml: ramps (or --ramps) says 8"]),
     ("k-huge-study", _run("k_big.toml"), ["k_big.npz: field 'ramps_per_frame' 1,000,000,000", "would take"]),
     ("size-ceiling", _run("size_ceiling.toml"), ["size_ceiling.toml: [simulation] ceiling_per_class "
                                                  "1,000,000,000,000"]),
