@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from mdaug.cli import build_parser, main
+from mdaug.cli.common import UsageError
 
 README = Path(__file__).resolve().parents[1] / "docs" / "cli.md"
 
@@ -85,3 +86,39 @@ def test_the_whole_block_runs_in_order_from_an_empty_folder(tmp_path, monkeypatc
     for name in ("old.npz", "new.npz", "post_heli.nc", "post_quad.nc", "post.npz", "cnn.zip", "m.json",
                  "sweep/sweep.md", "tsaug_cnn.zip", "tsaug.npz", "study/report.html"):
         assert (tmp_path / name).is_file(), name
+
+
+PLACEHOLDERS = {"C", "K", "N", "F", "J", "S", "P", "R", "DIR", "CLASS", "FILE", "ID", "WORK", "OUT"}
+
+
+def quoted_command_lines() -> list[tuple[str, str]]:
+    """(file, line) of every whole ``mdaug`` command the README and docs/ quote: a code
+    line, or a code span of the verb and three words or more (shorter spans name a verb
+    or an option in prose); those with placeholders (``...``, ``[--x N]``, DIR, K) are
+    left out."""
+    root = README.parents[1]
+    found = []
+    for doc in [root / "README.md", *sorted((root / "docs").glob("*.md"))]:
+        text = doc.read_text()
+        spans = [ln for ln in re.findall(r"`(mdaug [^`\n]+)`", text) if len(shlex.split(ln)) >= 5]
+        for line in spans + re.findall(r"^\s*(mdaug \S.*)$", text, re.M):
+            line = line.split("  #")[0].strip()
+            words = {w.split("=")[0].split("/")[0] for w in shlex.split(line)}
+            if "..." in line or "[" in line or words & PLACEHOLDERS:
+                continue
+            found.append((doc.name, line))
+    return sorted(set(found))
+
+
+def test_every_command_line_the_docs_quote_parses():
+    """A renamed or dropped option is caught wherever the docs still quote it."""
+    lines = quoted_command_lines()
+    assert len(lines) >= 20 and any(doc == "calibration.md" for doc, _ in lines)
+    parser = build_parser()
+    bad = []
+    for doc, line in lines:
+        try:
+            parser.parse_args(shlex.split(line)[1:])
+        except (SystemExit, UsageError) as exc:
+            bad.append(f"{doc}: {line}: {exc}")
+    assert not bad, bad
