@@ -67,7 +67,7 @@ def _command(args, cls: str, epochs: int) -> str:
 
 def run_train(args) -> int:
     from ..generator.acquisition import Acquisition
-    from ..inference.amortized.job import train_estimator
+    from ..inference.estimator_job import train_estimator
     from ..inference.amortized.shipped import default_nets, default_training
     from ..inference.amortized.simulate import SimulationSpec
     from ..inference.amortized.train import device_of
@@ -97,7 +97,7 @@ def run_train(args) -> int:
 
 def run_sbc(args) -> int:
     from ..generator.acquisition import Acquisition
-    from ..inference.amortized.job import estimator_sbc
+    from ..inference.estimator_job import estimator_sbc
     from ..inference.diagnostics.routes import headline
     from ..inference.amortized.shipped import find
     from ..inference.settings import CalibrationSettings

@@ -8,7 +8,8 @@ for measured acquisitions); :mod:`.result` (the posterior as arviz InferenceData
 NetCDF, its plots, report and augmenter); :mod:`.population` (the class as a
 population of drones); :mod:`.diagnostics` (simulation-based calibration). At the
 top: :mod:`.calibrate` (one drone -> a result), :mod:`.fit` (the multi-start nlopt
-fit), :mod:`.compare` (engine-count selection) and :mod:`.settings`. Imports
+fit), :mod:`.compare` (engine-count selection), :mod:`.estimator_job` (training an
+estimator: simulations, networks, its SBC) and :mod:`.settings`. Imports
 :mod:`mdaug.generator` and :mod:`mdaug.radar` only.
 """
 from .calibrate import calibrate

@@ -24,7 +24,7 @@ TINY = NetConfig(channels=(2, 4, 4, 4), trial_out=8, set_hidden=16, set_out=8, f
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
     """A tiny HELI K=4 estimator, trained for two epochs, and its file."""
-    from mdaug.inference.amortized.job import train_estimator
+    from mdaug.inference.estimator_job import train_estimator
     from mdaug.inference.amortized.train import TrainConfig
 
     torch.set_num_threads(1)

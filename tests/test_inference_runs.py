@@ -207,7 +207,7 @@ def test_sbc_uniform_ranks():
     estimator on 100 fresh truths: the outer-10% share near 0.10 and every label-free
     quantity's 90% coverage near 0.90 (the closed-form likelihood fails this: README)."""
     from mdaug.generator.acquisition import Acquisition
-    from mdaug.inference.amortized.job import estimator_sbc
+    from mdaug.inference.estimator_job import estimator_sbc
     from mdaug.inference.amortized.shipped import find
 
     est = find("HELI", Acquisition.measured(32))

@@ -5,11 +5,11 @@ density there, the drone space truths are drawn in); :mod:`.simulate` (training
 drones through the scene simulator and the chain, in resumable shards); :mod:`.nets`
 and :mod:`.train` (sbi's flow over a permutation-invariant embedding, the ratio
 network, the resumable training loop); :mod:`.estimator` (the trained estimator as a
-checked file); :mod:`.job` (training as a job, ending with its SBC, run by
-:mod:`..diagnostics.routes`); :mod:`.mcmc` (nlopt + emcee on the learned
+checked file; training one is a job one floor up, :mod:`..estimator_job`, ending
+with its SBC from :mod:`..diagnostics`); :mod:`.mcmc` (nlopt + emcee on the learned
 likelihood); :mod:`.calibrate` (one drone -> a CalibrationResult); :mod:`.shipped`
 (the estimators in ``data/``). Imports :mod:`mdaug.generator`, :mod:`mdaug.radar` and
 the inference rooms below it (space, likelihood preparation, the emcee driver,
-result, the SBC of diagnostics). torch loads with :mod:`.nets`, :mod:`.train` and :mod:`.estimator`
+result). torch loads with :mod:`.nets`, :mod:`.train` and :mod:`.estimator`
 (not with :mod:`mdaug.inference`), sbi inside the functions that build networks.
 """

@@ -32,7 +32,7 @@ def one(cls: str, ramps: int, n: int, workers: int, out: str, work: str, device:
     import torch
 
     from mdaug.generator.acquisition import Acquisition
-    from mdaug.inference.amortized.job import train_estimator
+    from mdaug.inference.estimator_job import train_estimator
     from mdaug.inference.amortized.shipped import default_nets, default_training
     from mdaug.inference.amortized.simulate import SimulationSpec
 

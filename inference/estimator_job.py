@@ -1,6 +1,7 @@
 """Training an estimator is a job: simulate (resumable shards, workers), train the
 posterior and the ratio network (progress bar, early stopping, checkpoints, the
-device), end with its own SBC of both routes on fresh drones, save.
+device), end with its own SBC of both routes on fresh drones, save. It uses both
+:mod:`.amortized` and :mod:`.diagnostics` (the SBC), so it lives above them.
 
 Everything lives in one work folder (``sims/``, ``posterior.ckpt``, ``ratio.ckpt``);
 a rerun with the same arguments resumes where it stopped.
@@ -13,14 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ...radar.seeds import child_seed, seed_sequence
-from .estimator import AmortizedEstimator
-from .nets import NetConfig
-from ..diagnostics.routes import headline
-from ..diagnostics.routes import run as run_sbc
-from .simulate import SimulationSpec, load_shards, simulate, simulate_shards
-from .target import LabelFree
-from .train import TrainConfig, device_of, fit, posterior_loss, ratio_loss
+from ..radar.seeds import child_seed, seed_sequence
+from .amortized.estimator import AmortizedEstimator
+from .amortized.nets import NetConfig
+from .amortized.simulate import SimulationSpec, load_shards, simulate, simulate_shards
+from .amortized.target import LabelFree
+from .amortized.train import TrainConfig, device_of, fit, posterior_loss, ratio_loss
+from .diagnostics.routes import headline
+from .diagnostics.routes import run as run_sbc
 
 SBC_MEASUREMENTS = 5
 
@@ -96,7 +97,7 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
                   mcmc_settings=None, progress=None, log=print) -> dict:
     """SBC of the amortized route on n_truths fresh drones (5 measurements each), and
     of the emcee route on the first ``mcmc_truths`` of them."""
-    from .mcmc import LearnedPosterior, sample
+    from .amortized.mcmc import LearnedPosterior, sample
 
     lf = est.label_free
     vectors, profiles = sbc_data(est.spec, n_truths, seed, workers)
@@ -117,7 +118,7 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
     out["amortized"]["inside_prior_share"] = float(np.mean(accepted))
     log(f"  SBC amortized: {headline(out['amortized'])}; draws inside the prior {np.mean(accepted):.3f}")
     if mcmc_truths:
-        from ..settings import CalibrationSettings
+        from .settings import CalibrationSettings
 
         settings = mcmc_settings or CalibrationSettings(progress=False)
 
