@@ -157,6 +157,23 @@ def test_estimator_file_round_trip(tiny, tmp_path):
     assert {"posterior", "ratio"} <= set(back.meta["training"])
 
 
+def test_log_prob_with_one_embedding_is_sbis_log_prob(tiny):
+    """log_prob_u embeds the measurements once; sbi's log_prob embeds them per draw:
+    the same densities, also for the shipped estimators' flow."""
+    import torch
+
+    from mdaug.inference.amortized.shipped import find
+
+    est, _ = tiny
+    for e in (est, find("HELI", est.spec.acquisition.replace(ramps=32))):
+        _, y = simulate(est.spec, 1, 4)
+        u = e.sample_u(y[0], 50, 3, strict=False)[0]
+        with torch.inference_mode():
+            t = torch.as_tensor(u, dtype=torch.float32)
+            want = e.posterior.log_prob(t[:, None, :], condition=e.condition(y[0])).reshape(-1).double().numpy()
+        np.testing.assert_allclose(e.log_prob_u(u, y[0]), want, rtol=1e-5, atol=1e-4)
+
+
 def test_posterior_is_invariant_to_the_order_of_measurements(tiny):
     est, _ = tiny
     _, y = simulate(est.spec, 1, 5)

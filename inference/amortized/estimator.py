@@ -127,11 +127,17 @@ class AmortizedEstimator:
         return u, kept / tried
 
     def log_prob_u(self, u: np.ndarray, profiles: np.ndarray) -> np.ndarray:
-        """Log density of the amortized posterior at u (n, d)."""
+        """Log density of the amortized posterior at u (n, d) given prepared profiles
+        (M, L). The profiles are embedded once: sbi's ``log_prob`` expands the condition
+        to every draw and embeds each copy (n CNN passes over M profiles), so this runs
+        the steps of its nflows flow (embedding, transform, base density) itself, with
+        the one embedding; the same numbers (``tests/test_amortized.py``)."""
+        flow = self.posterior.net  # the nflows Flow inside sbi's estimator
         with torch.inference_mode():
-            t = torch.as_tensor(np.asarray(u, np.float32), device=self._device)
-            lp = self.posterior.log_prob(t[:, None, :], condition=self.condition(profiles))
-            return lp.reshape(-1).double().cpu().numpy()
+            t = torch.as_tensor(np.asarray(u, np.float32), device=self._device).reshape(len(u), -1)
+            context = flow._embedding_net(self.condition(profiles)).expand(len(t), -1)
+            noise, log_det = flow._transform(t, context=context)
+            return (flow._distribution.log_prob(noise, context=context) + log_det).double().cpu().numpy()
 
     def embed(self, profiles: np.ndarray) -> torch.Tensor:
         """The ratio network's embeddings (M, D) of prepared profiles (M, L)."""
