@@ -75,7 +75,7 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
 
         with threadpool_limits(settings.threads):
             post = LearnedPosterior(est, data)
-            run, fit = sample(post, u[:1000], settings, child_seed(ss, "emcee"), u_pool=u)
+            run, fit = sample(post, u[:1000], settings, child_seed(ss, "emcee"))
         x_emcee = post.vectors(run.draws())
         names = post.label_free.names
         diag["emcee"] = {"converged": bool(run.converged), "reason": run.reason, "seconds": float(run.seconds),

@@ -12,10 +12,10 @@ Starts come from amortized draws: nlopt (a local derivative-free polish, BOBYQA 
 box around the draws) from the best of them, emcee's walkers from others; the
 sampler is the calibration's one emcee driver
 (:func:`mdaug.inference.samplers.emcee_run.run_ensemble`: DE moves, 50 tau with tau stable, time
-budget, Ctrl-C), so the same convergence rule applies. A share of its moves proposes
-from the amortized posterior (independence Metropolis-Hastings, :data:`P_PROPOSAL`):
-the target is unchanged, and where the two posteriors agree the chain mixes in a
-few steps (where they do not, the proposals are refused and the DE moves carry it).
+budget, Ctrl-C), so the same convergence rule applies. (Proposing a share of the moves
+from the amortized posterior, independence Metropolis-Hastings, was tried and dropped:
+on the default study's drones it left tau where it was, 140-160 steps HELI, 200-210
+QUAD, at 2-3x the seconds per step, the flow's density being the dear part.)
 """
 from __future__ import annotations
 
@@ -87,11 +87,10 @@ def polish(post: LearnedPosterior, starts: np.ndarray, max_eval: int = 400) -> t
     return best_u, float(best_v)
 
 
-def sample(post: LearnedPosterior, u_draws: np.ndarray, settings, seed, *, n_polish: int = 4,
-           u_pool: np.ndarray | None = None) -> tuple[SamplerRun, dict]:
+def sample(post: LearnedPosterior, u_draws: np.ndarray, settings, seed, *,
+           n_polish: int = 4) -> tuple[SamplerRun, dict]:
     """The fit and the chain (module doc). u_draws: amortized draws (n, d) to start
-    from; u_pool: amortized draws the independence move proposes (default u_draws).
-    Returns the emcee run and the fit's summary."""
+    from. Returns the emcee run and the fit's summary."""
     import time
 
     t0 = time.perf_counter()
@@ -109,27 +108,6 @@ def sample(post: LearnedPosterior, u_draws: np.ndarray, settings, seed, *, n_pol
     pick = rng.choice(len(starts), size=n_walkers, replace=len(starts) < n_walkers)
     p0 = starts[pick].copy()
     p0[0] = u_fit
-    proposal = IndependenceProposal(post, u_pool if u_pool is not None else u_draws)
-    run = run_ensemble(post, p0, settings, int(rng.integers(2**31 - 1)), phase_cols=(), proposal=proposal,
-                       p_proposal=P_PROPOSAL)
+    run = run_ensemble(post, p0, settings, int(rng.integers(2**31 - 1)), phase_cols=())
     return run, fit
 
-
-P_PROPOSAL = 0.3
-"""Share of emcee's moves that propose from the amortized posterior (independence
-Metropolis-Hastings: the target stays prior x learned likelihood)."""
-
-
-class IndependenceProposal:
-    """Draws from the amortized posterior (a pool of draws inside the prior, with their
-    log density) as an emcee ``MHMove`` proposal: returns (u', log q(u) - log q(u'))."""
-
-    def __init__(self, post: LearnedPosterior, pool: np.ndarray):
-        self.post, self.pool = post, np.asarray(pool, float)
-        self.log_q = post.estimator.log_prob_u(self.pool, post.profiles)
-
-    def __call__(self, coords, random):
-        idx = random.randint(len(self.pool), size=len(coords))
-        new = self.pool[idx]
-        factor = self.post.estimator.log_prob_u(coords, self.post.profiles) - self.log_q[idx]
-        return new.copy(), factor

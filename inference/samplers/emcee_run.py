@@ -58,7 +58,7 @@ def store_interval(own, n_walkers: int, dim: int) -> int:
     return max(1, int(np.ceil(steps * n_walkers * dim / MAX_STORED_FLOATS)))
 
 
-def make_moves(phase_cols, dim: int, relabel=None, p_relabel: float = 0.0, proposal=None, p_proposal: float = 0.0):
+def make_moves(phase_cols, dim: int, relabel=None, p_relabel: float = 0.0):
     """Differential-evolution moves whose proposals are wrapped on the phase columns.
 
     A DE proposal is a translation x + gamma (x_j - x_k) + noise whose law is symmetric
@@ -73,9 +73,6 @@ def make_moves(phase_cols, dim: int, relabel=None, p_relabel: float = 0.0, propo
     ``relabel`` (coords, random) -> (coords', log |Jacobian|): a random bijection
     whose inverse is as likely (:meth:`..space.layout.Layout.random_relabel`), used as an
     emcee ``MHMove`` for a share ``p_relabel`` of the steps (the DE weights shrink).
-    ``proposal`` (coords, random) -> (coords', log q(coords) - log q(coords')): an
-    independence proposal (e.g. an amortized posterior) as an ``MHMove`` for a share
-    ``p_proposal``; the target is unchanged, a proposal close to it only mixes faster.
     """
     import emcee
 
@@ -89,12 +86,10 @@ def make_moves(phase_cols, dim: int, relabel=None, p_relabel: float = 0.0, propo
             return q, f
 
     g_default = 2.38 / np.sqrt(2 * dim)
-    share = 1.0 - (p_relabel if relabel is not None else 0.0) - (p_proposal if proposal is not None else 0.0)
+    share = 1.0 - (p_relabel if relabel is not None else 0.0)
     moves = [(WrappedDEMove(gamma0=f * g_default if f else 1.0), w * share) for f, w in DE_MIX]
     if relabel is not None and p_relabel > 0:
         moves.append((emcee.moves.MHMove(relabel), p_relabel))
-    if proposal is not None and p_proposal > 0:
-        moves.append((emcee.moves.MHMove(proposal), p_proposal))
     return moves
 
 
@@ -129,7 +124,7 @@ def _block_end(it: int, check: int, max_steps: int | None) -> int:
 
 
 def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=None, fp: str = "",
-                 phase_cols=(), relabel=None, proposal=None, p_proposal: float = 0.0) -> SamplerRun:
+                 phase_cols=(), relabel=None) -> SamplerRun:
     """Run (or resume) the ensemble; see the module docstring.
 
     log_post: vectorised callable theta (W, dim) -> (W,); p0: (W, dim) start (ignored
@@ -138,8 +133,7 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
     ``relabel``, ``progress``; the emcee knobs at ``settings.of("emcee")``, an
     :class:`.ensemble.EmceeSettings`); seed: int for emcee's RandomState;
     phase_cols: columns that live on the circle (wrapped by the moves); relabel: the
-    exact-symmetry move (``settings.relabel`` of the steps), proposal: an independence
-    proposal for ``p_proposal`` of the steps, see :func:`make_moves`.
+    exact-symmetry move (``settings.relabel`` of the steps), see :func:`make_moves`.
     Stops at the first check at or after ``min_tau_multiple`` x max tau with tau
     stable, when ``time_budget`` seconds have passed (checked at every step), or at
     ``max_steps`` (None: no step cap). A Ctrl-C stops at the next step with the
@@ -152,7 +146,7 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
     t0 = time.perf_counter()
     own = settings.of("emcee")
     n_walkers, dim = p0.shape
-    moves = make_moves(phase_cols, dim, relabel, settings.relabel, proposal, p_proposal)
+    moves = make_moves(phase_cols, dim, relabel, settings.relabel)
     backend, resumed_at = None, 0
     if backend_path is not None:
         path = Path(backend_path)
