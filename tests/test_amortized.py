@@ -427,3 +427,35 @@ def test_out_of_range_is_judged_against_the_estimators_own_drones():
     far = x.copy()
     far[:, 2] *= 2.0  # w_a doubled in the other route: the two disagree on lines
     assert _out_of_range(lf, x, far, 0.7, 0.7)[0]
+
+
+def test_simulation_shards_resume_under_older_keys_and_refuse_another_seed(tmp_path):
+    """A work folder's shards are reused when their key names the same simulations,
+    also when it was written under an older field name (the radar's ramps_per_frame,
+    now max_ramps_per_frame); another seed is refused by name."""
+    import json
+
+    from mdaug.inference.amortized.simulate import SimulationSpec, simulate_shards
+    from mdaug.radar import atomic_savez
+
+    spec = SimulationSpec("HELI", Acquisition.measured(1), 2)
+    folder = tmp_path / "sims"
+    paths = simulate_shards(folder, spec, 4, seed=3, shard_size=2)
+    first = {p.name: np.load(p)["vectors"] for p in paths}
+
+    def legacy(key: str) -> str:
+        d = json.loads(key)
+        d["spec"]["radar"]["ramps_per_frame"] = d["spec"]["radar"].pop("max_ramps_per_frame")
+        return json.dumps(d, sort_keys=True)
+
+    stamp = folder / "simulation.json"
+    stamp.write_text(json.dumps({"key": legacy(json.loads(stamp.read_text())["key"])}))
+    with np.load(paths[0]) as f:
+        arrays = {k: f[k] for k in f.files}
+    atomic_savez(paths[0], **{**arrays, "key": np.array(legacy(str(arrays["key"])))})
+    logged = []
+    again = simulate_shards(folder, spec, 4, seed=3, shard_size=2, log=logged.append)
+    assert logged == [f"simulations: 2 of 2 shards found in {folder}, reused"]
+    assert all(np.array_equal(np.load(p)["vectors"], first[p.name]) for p in again)
+    with pytest.raises(ValueError, match="holds simulations of another spec or seed"):
+        simulate_shards(folder, spec, 4, seed=4, shard_size=2)

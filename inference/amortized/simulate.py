@@ -94,6 +94,19 @@ def shard_key(spec: SimulationSpec, seed, shard_size: int) -> str:
     return json.dumps({"spec": spec.to_dict(), "seed": str(seed), "shard_size": int(shard_size)}, sort_keys=True)
 
 
+def same_key(stored: str, key: str) -> bool:
+    """Whether a stored shard key names the simulations of ``key``: compared as read
+    today, so keys written under older field names (a radar's ``ramps_per_frame``, now
+    ``max_ramps_per_frame``) still match."""
+    if stored == key:
+        return True
+    try:
+        d = json.loads(stored)
+        return shard_key(spec_from_dict(d["spec"]), d["seed"], d["shard_size"]) == key
+    except (ValueError, KeyError, TypeError):
+        return False
+
+
 def simulate_shards(folder, spec: SimulationSpec, n: int, *, seed=0, shard_size: int = 500, workers: int = 1,
                     time_budget: float | None = None, progress=None, log=None) -> list[Path]:
     """Simulate n drones into ``folder`` in shards of ``shard_size`` (module doc); the
@@ -111,7 +124,7 @@ def simulate_shards(folder, spec: SimulationSpec, n: int, *, seed=0, shard_size:
     stamp = folder / "simulation.json"
     if stamp.is_file():
         stored = json.loads(stamp.read_text())
-        if stored.get("key") != key:
+        if not same_key(str(stored.get("key")), key):
             raise ValueError(f"{folder}: holds simulations of another spec or seed ({stamp.name} field 'key'); "
                              "use another folder")
     else:
@@ -125,7 +138,7 @@ def simulate_shards(folder, spec: SimulationSpec, n: int, *, seed=0, shard_size:
         if p.is_file():
             try:
                 with np.load(p, allow_pickle=False) as f:
-                    if str(f["key"]) == key and f["vectors"].shape[0] == size:
+                    if same_key(str(f["key"]), key) and f["vectors"].shape[0] == size:
                         continue
             except (OSError, ValueError, KeyError, EOFError):
                 pass
