@@ -166,7 +166,8 @@ def run_calibrate(args) -> int:
                             f"one calibration takes at most {MAX_MEASUREMENTS} of one drone (the supported case is "
                             "a handful; --specimen ID picks one drone, --population calibrates each)")
     check_calibrate_sizes(args, settings, len(profiles))
-    from .calibrate_amortized import amortized_settings, calibration_method, report_amortized
+    from .calibrate_amortized import (amortized_settings, calibration_method, report_amortized,
+                                      warn_several_drones)
 
     method = calibration_method(args, acquisition)
     how = ("the class's trained estimator" if method == "amortized" else
@@ -186,12 +187,13 @@ def run_calibrate(args) -> int:
 
         from ..inference.amortized.calibrate import calibrate_amortized
 
+        warn_several_drones(args, drones, cls)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             res = calibrate_amortized(profiles, cls.upper(), acquisition=acquisition, estimator=args.estimator,
                                       settings=amortized_settings(args, settings), random_state=args.seed,
                                       route=args.route or "amortized", source=str(args.measured))
-        return report_amortized(args, res, drones, caught, cls)
+        return report_amortized(args, res, drones, caught)
     if len(set(drones.tolist())) > 1:
         warn("calibrate", f"{args.measured} holds {len(set(drones.tolist()))} drones of {cls} (field 'specimen'); "
                           "they are calibrated as one drone: --population calibrates each and the class's "

@@ -49,12 +49,16 @@ def amortized_settings(args, settings):
     return settings.replace(time_budget=EMCEE_BUDGET) if args.time_budget is None else settings
 
 
-def report_amortized(args, res, drones, caught, cls) -> int:
-    """Write and report one drone's amortized calibration (``caught``: the warnings of
-    the run); the exit status."""
+def warn_several_drones(args, drones, cls) -> None:
+    """Before the run: several drones in the file are calibrated as one."""
     if len(set(drones.tolist())) > 1:
         warn("calibrate", f"{args.measured} holds {len(set(drones.tolist()))} drones of {cls} (field 'specimen'); "
                           "they are calibrated as one drone: --specimen ID calibrates one of them")
+
+
+def report_amortized(args, res, drones, caught) -> int:
+    """Write and report one drone's amortized calibration (``caught``: the warnings of
+    the run); the exit status."""
     res.record_specimens(drones)
     res.save(args.out)
     result(res.report())
