@@ -11,35 +11,18 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import (BYTES_SPECTRUM, EXIT_NOT_CONVERGED, SECONDS_LIKELIHOOD_RAMP, add_verb, check_size, count_2,
+from .common import (BYTES_SPECTRUM, EXIT_NOT_CONVERGED, SECONDS_LIKELIHOOD_RAMP, add_verb, check_size, count, count_2,
                      info, positive_float,
                      positive_int, result, seed_int, warn)
 from .options import acquisition_from_args, acquisition_given, add_acquisition_options
 
 
 
-def engines_arg(text: str):
-    if text == "auto":
-        return "auto"
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer or 'auto', got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer or 'auto', got {value}")
-    return value
+engines_arg = count(1, what="a positive integer or 'auto'", words=("auto",))
 
 
-def walkers_arg(text: str) -> int:
-    from .common import integer
-
-    return integer(text, 2, "an integer >= 2 (0 is not allowed here: leave the option out for auto)")
-
-
-def particles_arg(text: str) -> int:
-    from .common import integer
-
-    return integer(text, 2, "an integer >= 2 (leave the option out for auto)")
+walkers_arg = count(2, what="an integer >= 2 (0 is not allowed here: leave the option out for auto)")
+particles_arg = count(2, what="an integer >= 2 (leave the option out for auto)")
 
 
 def _cap(value) -> str:

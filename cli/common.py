@@ -90,10 +90,30 @@ def integer(text: str, lo: int | None = None, what: str = "an integer") -> int:
     return value
 
 
-positive_int = _type(lambda t: integer(t, 1, "a positive integer (>= 1)"), "positive_int")
-nonneg_int = _type(lambda t: integer(t, 0, "an integer >= 0"), "nonneg_int")
-seed_int = _type(lambda t: integer(t, 0, "a seed: an integer >= 0"), "seed_int")
-count_2 = _type(lambda t: integer(t, 2, "an integer >= 2"), "count_2")
+def count(lo: int = 1, hi: int | None = None, what: str | None = None, words: tuple = ()):
+    """The one argparse type of every count option: an integer in [lo, hi] (hi None: no
+    upper bound here; the size bound :func:`check_size` weighs it against memory and
+    time), or one of ``words`` (e.g. 'auto'). A value outside is refused by the parser,
+    which names the option (``argument --sbc-truths: expected an integer >= 0, got -1``)."""
+    if what is None:
+        what = (f"an integer from {lo} to {hi:,}" if hi is not None else
+                "a positive integer (>= 1)" if lo == 1 else f"an integer >= {lo}")
+
+    def parse(text: str):
+        if text in words:
+            return text
+        value = integer(text, lo, what)
+        if hi is not None and value > hi:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
+        return value
+
+    return _type(parse, f"count_{lo}_{hi}")
+
+
+positive_int = count(1)
+nonneg_int = count(0)
+seed_int = count(0, what="a seed: an integer >= 0")
+count_2 = count(2)
 
 
 def number(text: str, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,

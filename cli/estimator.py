@@ -11,28 +11,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .common import add_verb, info, integer, positive_float, positive_int, result, seed_int
+from .common import add_verb, count, info, nonneg_int, positive_float, positive_int, result, seed_int
 
 MAX_SIMULATIONS = 2_000_000
 MAX_MEASUREMENTS = 32
 
 
-def _sims(text: str) -> int:
-    import argparse
-
-    v = integer(text, 100, "an integer >= 100")
-    if v > MAX_SIMULATIONS:
-        raise argparse.ArgumentTypeError(f"expected at most {MAX_SIMULATIONS}, got {v}")
-    return v
-
-
-def _meas(text: str) -> int:
-    import argparse
-
-    v = integer(text, 1, "an integer >= 1")
-    if v > MAX_MEASUREMENTS:
-        raise argparse.ArgumentTypeError(f"expected at most {MAX_MEASUREMENTS} measurements per drone, got {v}")
-    return v
+_sims = count(100, MAX_SIMULATIONS)
+_meas = count(1, MAX_MEASUREMENTS, f"an integer from 1 to {MAX_MEASUREMENTS} (measurements per drone)")
 
 
 def _interrupted(args) -> str:
@@ -158,9 +144,9 @@ def add_train(sub, parents, help):
                    help="training seconds of the posterior network (default: none)")
     p.add_argument("--ratio-budget", type=positive_float, default=None, metavar="SECONDS",
                    help="training seconds of the likelihood network (default: none)")
-    p.add_argument("--sbc-truths", type=integer, default=300, metavar="N",
+    p.add_argument("--sbc-truths", type=nonneg_int, default=300, metavar="N",
                    help="SBC drones of the amortized route (default: %(default)s; 0: none)")
-    p.add_argument("--sbc-emcee-truths", type=integer, default=0, metavar="N",
+    p.add_argument("--sbc-emcee-truths", type=nonneg_int, default=0, metavar="N",
                    help="SBC drones of the emcee route (default: %(default)s)")
     p.set_defaults(func=run_train)
     return p
@@ -176,7 +162,7 @@ def add_sbc(sub, parents, help):
     p.add_argument("--estimator", type=Path, default=None, help="estimator ZIP (default: the shipped one)")
     p.add_argument("--truths", type=positive_int, default=300, metavar="N",
                    help="fresh simulated drones, 5 measurements each (default: %(default)s)")
-    p.add_argument("--emcee-truths", type=integer, default=0, metavar="N",
+    p.add_argument("--emcee-truths", type=nonneg_int, default=0, metavar="N",
                    help="of those, how many also through nlopt + emcee on the learned likelihood (default: %(default)s)")
     p.add_argument("--time-budget", type=positive_float, default=60.0, metavar="SECONDS",
                    help="emcee seconds per drone (default: %(default)s)")
