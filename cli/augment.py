@@ -15,7 +15,7 @@ import argparse
 from pathlib import Path
 
 from .common import (SAMPLES, SECONDS_CHAIN_RAMP, SECONDS_FAST_RAMP, add_verb, check_size, class_list, info,
-                     nonneg_float, positive_int, result, seed_int, unit_fraction, warn)
+                     nonneg_float, positive_int, ramps_factor, result, seed_int, unit_fraction, warn)
 from .options import SIGN_POLICIES, acquisition_from_args, acquisition_given, add_acquisition_options
 
 DEFAULT_CLASSES = ("HELI", "QUAD")
@@ -43,6 +43,10 @@ def augmenters_from_args(args) -> tuple[list, dict | None, list[str]]:
         raise ValueError(f"--fit/--posterior/--population name a class twice: {names}")
     if names and args.classes is not None:
         raise ValueError("--fit/--posterior/--population give the classes; drop --classes")
+    if pops and args.specimen_width is not None:
+        raise ValueError("--specimen-width applies to --fit, --posterior and --classes, not to --population (a "
+                         "population's new drones already spread as its measured drones do; the two spreads would "
+                         "stack)")
     if pops and args.sigma_p is not None and not fits:
         raise ValueError("--sigma-p applies to sigma_P sources (--classes or --fit), not to --population")
     if posts and args.sigma_p is not None and not fits:
@@ -94,7 +98,8 @@ def check_augment_sizes(args, augmenters) -> None:
     n = ("--n-per-class", args.n_per_class, 16000)
     for aug in augmenters:
         acq, e = aug.renderer.acquisition, aug.n_engines
-        ramps = ("--ramps", acq.ramps, 32)
+        ramps = ramps_factor("--ramps" if args.ramps is not None else f"{aug.label}: the calibration's ramps per "
+                             "frame", acq.ramps)
         if args.through_chain:
             frames = ("--mti-depth (+ 1 frames)", acq.mti_depth + 1, 11)
             check_size(ramps, frames, bytes_each=e * SAMPLES * 8 * 4, what="ramp frames of one profile")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import (BYTES_SPECTRUM, EXIT_NOT_CONVERGED, SECONDS_LIKELIHOOD_RAMP, add_verb, check_size, count, count_2,
+from .common import (BYTES_SPECTRUM, EXIT_NOT_CONVERGED, SECONDS_LIKELIHOOD_RAMP, add_verb, check_size, count, count_2, ramps_factor,
                      info, positive_float,
                      positive_int, result, seed_int, warn)
 from .options import acquisition_from_args, acquisition_given, add_acquisition_options
@@ -84,6 +84,25 @@ PLUGIN_OPTIONS = {"max_steps": (("emcee", "max_steps"),), "walkers": (("emcee", 
 """Options -> the sampler plugins' knobs each sets (--particles sizes both SMC and Laplace)."""
 
 
+def check_options_apply(args, settings, acquisition, k_name: str) -> None:
+    """Options that do not apply to this calibration are refused by name (the pattern of
+    :data:`.calibrate_amortized.CLOSED_FORM_ONLY`): a sampler plugin's option with
+    another sampler, ``--ramps-drawn`` beyond the data's K (``k_name``: where K comes
+    from), ``--likelihood fitted`` on data whose phases are random."""
+    for dest, targets in PLUGIN_OPTIONS.items():
+        plugins = sorted({plugin for plugin, _ in targets})
+        if getattr(args, dest) is not None and settings.sampler not in plugins:
+            raise ValueError(f"--{dest.replace('_', '-')} applies to --sampler {' or '.join(plugins)}; this "
+                             f"calibration samples with {settings.sampler}")
+    if args.ramps_drawn is not None and args.ramps_drawn > acquisition.ramps:
+        raise ValueError(f"--ramps-drawn {args.ramps_drawn}: more ramps than the data's K = {acquisition.ramps} "
+                         f"({k_name}); at most K")
+    if args.likelihood == "fitted" and acquisition.phases == "uniform":
+        raise ValueError(f"--likelihood fitted fits one set of phases per measurement, but the data's acquisition "
+                         f"draws random phases per frame ({k_name}: K = {acquisition.ramps}, phases uniform); use "
+                         "--likelihood marginal (the default for such data)")
+
+
 def settings_from_args(args, base):
     """``base`` (a :class:`~mdaug.inference.settings.CalibrationSettings`) with the options
     the command line gave (None: not given) mapped onto the shared settings and the
@@ -140,6 +159,9 @@ def run_calibrate(args) -> int:
     resolve_acquisition(from_file, None if args.ramps is None else Acquisition.measured(args.ramps),
                         str(args.measured), "--ramps")  # the one file-against-setting rule (K must agree)
     acquisition, _ = acquisition_from_args(args, from_file)
+    k_name = ("--ramps" if args.ramps is not None else f"{args.measured}: field 'ramps_per_frame'"
+              if from_file is not None else "the published single chirp")
+    ramps_factor(k_name, acquisition.ramps)  # the radar's bound, named, before any estimate
     source = ("from the options" if acquisition_given(args) else
               f"as {args.measured} states it" if from_file is not None else "the published single chirp (default)")
     settings = settings_from_args(args, base.replace(threads=args.threads, progress=progress_enabled(),
@@ -153,6 +175,7 @@ def run_calibrate(args) -> int:
                                       warn_several_drones)
 
     method = calibration_method(args, acquisition)
+    check_options_apply(args, settings, acquisition, k_name)
     how = ("the class's trained estimator" if method == "amortized" else
            f"engines {args.engines or 'reference'}; chain checkpoint {backend}")
     info(f"calibrating {args.class_name.upper()} from {len(profiles)} profile(s) of {args.measured} "

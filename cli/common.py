@@ -270,6 +270,7 @@ SECONDS_TREE_BIN = 1e-9         # XGBoost: one tree over one profile bin
 SECONDS_RESAMPLE = 5e-9         # bootstrap: one resampled prediction (measured ~15 ns)
 SECONDS_TSAUG = 5e-6            # tsaug: one augmented profile
 SECONDS_LIKELIHOOD_RAMP = 2e-6  # calibration: one simulated ramp of one engine in one likelihood evaluation
+SECONDS_SIMULATED_RAMP = 5e-5   # estimator drones: one ramp of one measurement, scene + chain (measured 160-230 us)
 BYTES_SPECTRUM = 4096 * 16      # one complex 4096-point range spectrum
 CHAIN_ANTENNAS = 8
 SAMPLES = 504
@@ -281,6 +282,17 @@ def check_size(*factors, bytes_each: float = 0.0, seconds_each: float = 0.0, wha
     from ..radar.memory import check_size as bound
 
     bound([f for f in factors if f[1] is not None], bytes_each=bytes_each, seconds_each=seconds_each, what=what)
+
+
+def ramps_factor(name: str, k: int, typical: int = 32) -> tuple[str, int, int]:
+    """The size factor of K ramps per frame, ``(name, k, typical)`` for :func:`check_size`,
+    after the radar's own bound (``max_ramps_per_frame``): a K the radar cannot run is
+    refused by that bound, naming the option or the file and field (``name``), before
+    any estimate of time or memory."""
+    from ..radar import RadarConfig
+
+    RadarConfig().check_ramps(int(k), name)
+    return name, k, typical
 
 
 def check_training_memory(n_profiles: int, option: str, n_per_class: int, n_classes: int,

@@ -5,8 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from .common import (BYTES_SPECTRUM, CHAIN_ANTENNAS, SAMPLES, SECONDS_SCENE_RAMP, add_verb, check_size, class_list,
-                     finite_float, float_pair, info, nonneg_float, nonneg_int, nothing_written, positive_int, result,
-                     seed_int)
+                     finite_float, float_pair, info, nonneg_float, nonneg_int, nothing_written, positive_int, ramps_factor,
+                     result, seed_int)
 from .options import DTYPES, add_chain_options, chain_from_args
 
 SCENE_PHASES = ("fixed", "uniform")  # checked against mdaug.generator.chain.SCENE_PHASES in tests
@@ -38,7 +38,7 @@ def check_simulate_sizes(args, frames: int) -> None:
                          "specimen needs at least one acquisition")
     n_classes = len(args.class_name)
     acq = ("--acquisitions", args.acquisitions, 100)
-    ramps, frm = ("--ramps", args.ramps, 32), ("--frames", frames, 11)
+    ramps, frm = ramps_factor("--ramps", args.ramps), ("--frames", frames, 11)
     chunk = min(args.acquisitions, 8)  # acquisitions rendered together (generator.chain.CHUNK_ACQ)
     check_size(ramps, frm, bytes_each=chunk * CHAIN_ANTENNAS * SAMPLES * 8 * 2, what="ramp frames in memory at once")
     check_size(("--n-angle", args.n_angle, 64), frm, bytes_each=chunk * BYTES_SPECTRUM, what="angle-range images")

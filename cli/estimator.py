@@ -21,6 +21,44 @@ _sims = count(100, MAX_SIMULATIONS)
 _meas = count(1, MAX_MEASUREMENTS, f"an integer from 1 to {MAX_MEASUREMENTS} (measurements per drone)")
 
 
+SBC_MEASUREMENTS = 5     # measurements of each SBC drone (inference.estimator_job.SBC_MEASUREMENTS)
+EMCEE_SBC_SECONDS = 1200.0  # the emcee route's seconds per SBC drone of train-estimator (the calibration default)
+
+
+def check_estimator_sizes(args) -> None:
+    """Every size of ``train-estimator`` or ``sbc`` against memory and a day of work
+    (:func:`.common.check_size`), the radar's bound on --ramps first; before any file
+    or folder is written."""
+    from ..radar import RadarConfig
+    from .common import SECONDS_CNN_PROFILE, SECONDS_SIMULATED_RAMP, check_size, ramps_factor
+
+    k = ramps_factor("--ramps", args.ramps)
+    profile = RadarConfig().slice_length * 4  # float32
+    training = args.verb == "train-estimator"
+    truths_name = "--sbc-truths" if training else "--truths"
+    emcee_name = "--sbc-emcee-truths" if training else "--emcee-truths"
+    truths, emcee = (args.sbc_truths, args.sbc_emcee_truths) if training else (args.truths, args.emcee_truths)
+    if emcee > truths:
+        raise ValueError(f"{emcee_name} {emcee:,} exceeds {truths_name} {truths:,}: the emcee route is checked on "
+                         f"the first {emcee_name} of the {truths_name} drones")
+    if training:
+        sims, meas = ("--simulations", args.simulations, 20000), ("--measurements", args.measurements, 10)
+        check_size(sims, meas, bytes_each=2 * profile, what="simulated profiles in memory")
+        check_size(sims, meas, k, seconds_each=SECONDS_SIMULATED_RAMP, what="simulated ramps")
+        check_size(sims, meas, ("--epochs", args.epochs or 1, 100), seconds_each=2 * SECONDS_CNN_PROFILE,
+                   what="profile passes of the two networks")
+    n = (truths_name, truths, 300)
+    check_size(n, bytes_each=SBC_MEASUREMENTS * profile + 2 * 13 * 4 * 8, what="SBC drones' profiles and vectors")
+    check_size(n, k, seconds_each=SBC_MEASUREMENTS * SECONDS_SIMULATED_RAMP, what="simulated ramps of SBC drones")
+    budget = EMCEE_SBC_SECONDS if training else args.time_budget
+    if training:
+        check_size((emcee_name, emcee, 10), seconds_each=budget,
+                   what=f"SBC drones through the emcee route, {budget / 60:.0f} min each")
+    else:
+        check_size((emcee_name, emcee, 10), ("--time-budget", budget, 60), seconds_each=1.0,
+                   what="seconds of the emcee route")
+
+
 def _interrupted(args) -> str:
     if args.verb == "train-estimator":
         return (f"the simulations and training checkpoints in {_work(args)} are kept; run the same command again "
@@ -62,6 +100,7 @@ def run_train(args) -> int:
 
     cls = _class(args.class_name)
     device_of(args.device)  # refuses cuda without a GPU, before any work
+    check_estimator_sizes(args)
     check_paths(outputs=[Output("--out", args.out, "model"), Output("--work", _work(args), "folder")])
     spec = SimulationSpec(cls, Acquisition.measured(args.ramps), args.measurements)
     cfg = default_training()
@@ -91,6 +130,7 @@ def run_sbc(args) -> int:
     from .guard import Output, check_paths
 
     cls = _class(args.class_name)
+    check_estimator_sizes(args)
     check_paths(inputs=[("--estimator", args.estimator)], outputs=[Output("--json", args.json, "json"),
                                                                     Output("--figure", args.figure, "plot")])
     est = find(cls, Acquisition.measured(args.ramps), path=args.estimator)

@@ -78,13 +78,13 @@ def summary(results: dict) -> str:
 
 def check_study_ramps(cfg) -> None:
     """--ramps against time: the simulated campaign and the synthetic sets render K ramps."""
-    from .common import SECONDS_FAST_RAMP, SECONDS_SCENE_RAMP, check_size
+    from .common import SECONDS_FAST_RAMP, SECONDS_SCENE_RAMP, check_size, ramps_factor
 
     s, p = cfg.simulation, cfg.protocol
     frames = 11
     acquisitions = sum(s.n_calibration + s.n_select + n * (1 + s.large_factor) for n in s.n_new.values())
     rendered = len(cfg.classes) * (p.cnn_n_per_class + p.sweep_n_per_class * len(p.sigma_p))
-    check_size(("--ramps", cfg.scene_ramps, 32), seconds_each=acquisitions * frames * SECONDS_SCENE_RAMP
+    check_size(ramps_factor("--ramps", cfg.scene_ramps), seconds_each=acquisitions * frames * SECONDS_SCENE_RAMP
                + rendered * SECONDS_FAST_RAMP, what="ramps per frame")
 
 

@@ -10,7 +10,7 @@ options' refusals name the option.
 from __future__ import annotations
 
 from .common import (SECONDS_CHAIN_RAMP, SECONDS_CNN_PROFILE, SECONDS_FAST_RAMP, SECONDS_LIKELIHOOD_RAMP,
-                     SECONDS_RESAMPLE, SECONDS_SCENE_RAMP, check_size)
+                     SECONDS_RESAMPLE, SECONDS_SCENE_RAMP, check_size, ramps_factor)
 
 FRAMES = 11        # the scene's frames per acquisition (MTI over 10, and the current one)
 BINS = 400
@@ -58,7 +58,7 @@ def _check(cfg) -> None:
     key = lambda section, name: f"[{section}] {name}"  # noqa: E731
     n_cls = len(cfg.classes)
     k_name, k = _ramps(cfg)
-    ramps = (k_name, k, 32)
+    ramps = ramps_factor(k_name, k)  # the radar's bound first, then time and memory
     strategies = max(len(p.strategies), 1)
     if cfg.simulated:
         drones = s.calibration_drones + (s.calibration_drones > 1)

@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from .classify import CNN_BINS, check_boot_size, check_training_sizes
-from .common import (SECONDS_FAST_RAMP, add_verb, check_size, check_training_memory, class_list, info,
+from .common import (SECONDS_FAST_RAMP, add_verb, check_size, check_training_memory, class_list, info, ramps_factor,
                      load_profile_file, model_list, nonneg_int, path_list, positive_int, result, seed_int,
                      sigma_list)
 from .options import acquisition_from_args, add_acquisition_options, add_classifier_options, model_params
@@ -55,7 +55,7 @@ def check_sweep_sizes(args, acq, n_test: int) -> None:
     cells = len(args.classes) * len(args.sigma_p)
     engines = max(load_reference(c).n_engines for c in args.classes)
     n = ("--n-per-class", args.n_per_class, 4000)
-    check_size(n, ("--ramps", acq.ramps, 32), seconds_each=cells * engines * SECONDS_FAST_RAMP,
+    check_size(n, ramps_factor("--ramps", acq.ramps), seconds_each=cells * engines * SECONDS_FAST_RAMP,
                what="rendered ramps")
     for m in args.models:
         check_training_sizes(args, m, args.n_per_class, cells)

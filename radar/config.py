@@ -143,8 +143,8 @@ class RadarConfig:
     def check_ramps(self, k: int, what: str = "Acquisition.ramps") -> None:
         """Refuse K ramps per frame beyond what the radar runs (``what`` names the setting)."""
         if k > self.max_ramps_per_frame:
-            raise ValueError(f"{what} = {k}: more ramps per frame than the radar runs "
-                             f"(RadarConfig.max_ramps_per_frame = {self.max_ramps_per_frame})")
+            raise ValueError(f"{what} = {k}: more ramps per frame than the radar runs (its max_ramps_per_frame "
+                             f"is {self.max_ramps_per_frame})")
 
     def replace(self, **changes) -> "RadarConfig":
         return dataclasses.replace(self, **changes)

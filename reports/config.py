@@ -214,7 +214,7 @@ class StudyConfig:
         for group in ("calibration", "select", "test"):
             for name, path in getattr(self.data, group).items():
                 if group in ("calibration", "select") and name not in self.classes:
-                    raise ValueError(f"{src}: data.calibration names unknown class {name!r} "
+                    raise ValueError(f"{src}: data.{group} names unknown class {name!r} "
                                      f"(classes: {list(self.classes)})")
                 if not Path(path).is_file():
                     raise ValueError(f"{src}: data.{group}.{name}: file not found: {path}")
@@ -222,6 +222,9 @@ class StudyConfig:
             raise ValueError(f"{src}: data.calibration must give a file for every class {list(self.classes)}")
         if self.data.select and set(self.data.select) != set(self.classes):
             raise ValueError(f"{src}: data.select must give a file for every class {list(self.classes)} (or none)")
+        if self.data.select and not self.data.calibration:
+            raise ValueError(f"{src}: data.select is given but data.calibration and data.test are not: the "
+                             "simulated scene makes its own selection set; give all three, or leave select out")
         if self.data.calibration and not self.data.test:
             raise ValueError(f"{src}: data.calibration is given but data.test is not: give both, or neither "
                              "(the embedded simulated scene)")
@@ -264,6 +267,9 @@ class StudyConfig:
             if getattr(sim, name) < 1:
                 raise ValueError(f"{src}: simulation.{name} must be >= 1")
         for cls, n in sim.n_new.items():
+            if cls not in self.classes and cls not in SimulationConfig().n_new:  # the defaults' own: harmless
+                raise ValueError(f"{src}: simulation.n_new names unknown class {cls!r} (classes: "
+                                 f"{list(self.classes)})")
             if n < 1:
                 raise ValueError(f"{src}: simulation.n_new.{cls} must be >= 1")
         if check_files:

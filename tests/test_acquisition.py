@@ -161,10 +161,10 @@ def test_k_beyond_the_radars_ramps_per_frame_is_refused_on_both_paths():
     x = load_reference("HELI").to_array()[None]
     small = RadarConfig(max_ramps_per_frame=8)
     draw_acquisitions(x, Acquisition.measured(8), np.random.default_rng(0), small)  # at the bound: fine
-    with pytest.raises(ValueError, match=r"Acquisition\.ramps = 32: .*RadarConfig\.max_ramps_per_frame = 8"):
+    with pytest.raises(ValueError, match=r"Acquisition\.ramps = 32: .*max_ramps_per_frame is 8"):
         draw_acquisitions(x, Acquisition.measured(32), np.random.default_rng(0), small)
     scene = SceneConfig().with_acquisition(ramps=32)
-    with pytest.raises(ValueError, match=r"SceneConfig\.acquisition\.ramps = 32: .*max_ramps_per_frame = 8"):
+    with pytest.raises(ValueError, match=r"SceneConfig\.acquisition\.ramps = 32: .*max_ramps_per_frame is 8"):
         render_through_chain(x, scene, small, random_state=0)
     old = {**RadarConfig().to_dict(), "ramps_per_frame": 500}
     del old["max_ramps_per_frame"]

@@ -81,3 +81,87 @@ def test_a_count_below_its_bound_is_refused_by_the_parser(verb, option, io_dirs,
 def test_the_issue_counts(argv, must, io_dirs, refused):
     d, out = io_dirs
     refused([a.format(d=d, o=out) for a in argv], d, out, must, seconds=5)
+
+
+# ---- 2. sizes: one check before any work; the radar's bound on K first ---------------------------
+@pytest.fixture
+def size_dirs(io_dirs):
+    d, out = io_dirs
+    atomic_savez(d / "k1001.npz", profiles=_profiles(), labels=LABELS, ramps_per_frame=np.array(1001))
+    (d / "k1001.toml").write_text('[data]\ncalibration = { HELI = "k1001.npz", QUAD = "k1001.npz" }\n'
+                                  'test = { new = "k1001.npz" }\n')
+    return d, out
+
+
+TRAIN = ["train-estimator", "--class", "HELI", "--out", "{o}/e.zip"]
+SIZE_CASES = [
+    ("train-days", [*TRAIN, "--ramps", "1000", "--simulations", "2000000"], ["--simulations 2,000,000", "would take"]),
+    ("train-radar-k", [*TRAIN, "--ramps", "1001"], ["--ramps = 1001: more ramps per frame than the radar runs",
+                                                    "max_ramps_per_frame is 1000"]),
+    ("train-emcee-sbc", [*TRAIN, "--ramps", "4", "--sbc-emcee-truths", "100"], ["--sbc-emcee-truths 100",
+                                                                                 "would take"]),
+    ("sbc-truths", ["sbc", "--class", "HELI", "--ramps", "4", "--truths", "1000000000"],
+     ["--truths 1,000,000,000", "would take"]),
+    ("sbc-emcee-days", ["sbc", "--class", "HELI", "--ramps", "4", "--truths", "3000", "--emcee-truths", "3000"],
+     ["--emcee-truths 3,000 (with --time-budget 60)", "would take"]),
+    ("sbc-emcee-beyond-truths", ["sbc", "--class", "HELI", "--ramps", "4", "--truths", "3", "--emcee-truths", "5"],
+     ["--emcee-truths 5 exceeds --truths 3"]),
+    ("sbc-radar-k", ["sbc", "--class", "HELI", "--ramps", "1001"], ["--ramps = 1001", "max_ramps_per_frame"]),
+    ("simulate-radar-k", ["simulate", "--class", "HELI", "--acquisitions", "1", "--ramps", "1001", "--out",
+                          "{o}/s.npz"], ["--ramps = 1001", "max_ramps_per_frame"]),
+    ("augment-radar-k", ["augment", "--classes", "HELI", "--n-per-class", "10", "--ramps", "1001", "--out",
+                         "{o}/a.npz"], ["--ramps = 1001", "max_ramps_per_frame"]),
+    ("run-radar-k", ["run", "--ramps", "1001", "--out", "{o}/study"], ["--ramps = 1001", "max_ramps_per_frame"]),
+    ("calibrate-file-k", ["calibrate", "{d}/k1001.npz", "--class", "HELI", "--out", "{o}/p.nc"],
+     ["k1001.npz: field 'ramps_per_frame' = 1001", "max_ramps_per_frame"]),
+    ("run-file-k", ["run", "--config", "{d}/k1001.toml", "--out", "{o}/study"],
+     ["k1001.toml: ", "k1001.npz: field 'ramps_per_frame' = 1001", "max_ramps_per_frame"]),
+]
+
+
+@pytest.mark.parametrize("case", SIZE_CASES, ids=[c[0] for c in SIZE_CASES])
+def test_sizes_are_refused_before_work(case, size_dirs, refused):
+    _, argv, must = case
+    d, out = size_dirs
+    refused([a.format(d=d, o=out) for a in argv], d, out, must, seconds=10)
+
+
+def test_the_radar_bound_comes_before_the_time_estimate():
+    from mdaug.cli.common import ramps_factor
+
+    assert ramps_factor("--ramps", 1000) == ("--ramps", 1000, 32)
+    with pytest.raises(ValueError, match=r"^f\.npz: field 'ramps_per_frame' = 10000000: more ramps"):
+        ramps_factor("f.npz: field 'ramps_per_frame'", 10 ** 7)
+
+
+# ---- 4. options that do not apply: refused by name -------------------------------------------------
+CAL = ["calibrate", "{d}/m.npz", "--class", "HELI", "--out", "{o}/p.nc", "--method", "likelihood"]
+APPLY_CASES = [
+    ("particles-with-emcee", [*CAL, "--particles", "100"], ["--particles applies to --sampler laplace or smc",
+                                                            "samples with emcee"]),
+    ("walkers-with-smc", [*CAL, "--sampler", "smc", "--walkers", "40"], ["--walkers applies to --sampler emcee",
+                                                                         "samples with smc"]),
+    ("ramps-drawn-beyond-k", [*CAL, "--ramps-drawn", "8"], ["--ramps-drawn 8: more ramps than the data's K = 4",
+                                                            "m.npz: field 'ramps_per_frame'"]),
+    ("fitted-on-random-phases", [*CAL, "--likelihood", "fitted"], ["--likelihood fitted", "phases uniform"]),
+    ("specimen-width-with-population", ["augment", "--population", "HELI={d}/m.npz", "--specimen-width", "1",
+                                        "--n-per-class", "5", "--out", "{o}/a.npz"],
+     ["--specimen-width applies to", "not to --population"]),
+    ("n-new-unknown-class", ["run", "--config", "{d}/n_new.toml", "--out", "{o}/study"],
+     ["n_new.toml: simulation.n_new names unknown class 'DRONE'"]),
+    ("select-alone", ["run", "--config", "{d}/select.toml", "--out", "{o}/study"],
+     ["select.toml: data.select is given but data.calibration and data.test are not"]),
+    ("select-unknown-class", ["run", "--config", "{d}/select_class.toml", "--out", "{o}/study"],
+     ["select_class.toml: data.select names unknown class 'DRONE'"]),
+]
+
+
+@pytest.mark.parametrize("case", APPLY_CASES, ids=[c[0] for c in APPLY_CASES])
+def test_options_that_do_not_apply_are_refused(case, io_dirs, refused):
+    _, argv, must = case
+    d, out = io_dirs
+    (d / "n_new.toml").write_text("[simulation]\nn_new = { HELI = 5, DRONE = 3 }\n")
+    (d / "select.toml").write_text('[data]\nselect = { HELI = "m.npz", QUAD = "m.npz" }\n')
+    (d / "select_class.toml").write_text('[data]\ncalibration = { HELI = "m.npz", QUAD = "m.npz" }\n'
+                                         'select = { DRONE = "m.npz", QUAD = "m.npz" }\ntest = { new = "m.npz" }\n')
+    refused([a.format(d=d, o=out) for a in argv], d, out, must, seconds=10)

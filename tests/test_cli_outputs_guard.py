@@ -129,9 +129,9 @@ SWEEP = ["sweep", "--test", "{d}/t.npz", "--out", "{o}/sw", "--n-per-class", "20
 
 # (case id, argv, substrings): every size or count option, far beyond reason
 SIZES = [
-    ("augment-ramps", [*AUG, "--n-per-class", "10", "--ramps", "1000000000"], ["--ramps 1,000,000,000", "24 h"]),
+    ("augment-ramps", [*AUG, "--n-per-class", "10", "--ramps", "1000000000"], ["--ramps = 1000000000: more ramps per frame than the radar runs", "max_ramps_per_frame is 1000"]),
     ("augment-ramps-through-chain", [*AUG, "--n-per-class", "10", "--through-chain", "--ramps", "10000000"],
-     ["--ramps 10,000,000", "of memory"]),
+     ["--ramps = 10000000", "max_ramps_per_frame is 1000"]),
     ("augment-mti-depth-chain", [*AUG, "--n-per-class", "10", "--through-chain", "--mti-depth", "1000000000"],
      ["--mti-depth", "of memory"]),
     ("augment-n-per-class-time", [*AUG, "--n-per-class", "100000000", "--acquisition", "measured", "--ramps", "32"],
@@ -141,7 +141,7 @@ SIZES = [
     ("simulate-acquisitions", [*SIM, "--acquisitions", BIG], ["--acquisitions 1,000,000,000,000"]),
     ("simulate-two-classes", ["simulate", "--class", "HELI,QUAD", "--out", "{o}/s.npz", "--acquisitions",
                               "10000000000"], ["--acquisitions 10,000,000,000"]),
-    ("simulate-ramps", [*SIM, "--acquisitions", "5", "--ramps", "1000000"], ["--ramps 1,000,000", "of memory"]),
+    ("simulate-ramps", [*SIM, "--acquisitions", "5", "--ramps", "1000000"], ["--ramps = 1000000", "max_ramps_per_frame is 1000"]),
     ("simulate-frames", [*SIM, "--acquisitions", "5", "--frames", "1000000000"], ["--frames 1,000,000,000"]),
     ("simulate-clutter", [*SIM, "--acquisitions", "5", "--clutter", "100000000"], ["--clutter 100,000,000"]),
     ("simulate-n-angle", [*SIM, "--acquisitions", "5", "--n-angle", "100000000000"], ["--n-angle 100,000,000,000"]),
@@ -168,7 +168,7 @@ SIZES = [
      ["--n-estimators"]),
     ("evaluate-n-boot", ["evaluate", "{d}/nb.zip", "{d}/t.npz", "--n-boot", "10000000000000"], ["--n-boot"]),
     ("sweep-n-boot", [*SWEEP, "--n-boot", BIG], ["--n-boot"]),
-    ("sweep-ramps", [*SWEEP, "--ramps", "1000000000"], ["--ramps 1,000,000,000"]),
+    ("sweep-ramps", [*SWEEP, "--ramps", "1000000000"], ["--ramps = 1000000000", "max_ramps_per_frame is 1000"]),
     ("sweep-epochs", [*SWEEP, "--models", "cnn", "--epochs", BIG], ["--epochs"]),
     ("sweep-trees", [*SWEEP, "--models", "xgb", "--n-estimators", BIG], ["--n-estimators"]),
     ("sweep-workers", [*SWEEP, "--workers", BIG], ["--workers"]),
@@ -177,7 +177,7 @@ SIZES = [
     ("baseline-n-per-class-time", ["baseline", "{d}/m.npz", "--out", "{o}/b.zip", "--n-per-class", "100000000"],
      ["--n-per-class 100,000,000"]),
     ("baseline-folds", ["baseline", "{d}/m.npz", "--folds", "11"], ["--folds 11", "m.npz holds only 10 profile(s)"]),
-    ("run-ramps", ["run", "--out", "{o}/study", "--ramps", "1000000"], ["--ramps 1,000,000"]),
+    ("run-ramps", ["run", "--out", "{o}/study", "--ramps", "1000000"], ["--ramps = 1000000", "max_ramps_per_frame is 1000"]),
 ]
 
 
