@@ -330,9 +330,12 @@ def format_metrics(m: dict) -> str:
         s = f"{v:6.1%}"
         return s + (f" [{interval[0]:.1%}, {interval[1]:.1%}]" if interval else "")
 
+    words = degenerate_words(degenerate(m))
+    # a degenerate model's balanced accuracy (often 50.0% [50.0%, 50.0%]) is not a score: say so on its line
+    flag = f"  ({words[0]}: not a score)" if words and words[0].startswith("degenerate") else ""
     lines = [f"n = {m['n']}",
              f"accuracy          {fmt(m['accuracy'], ci.get('accuracy'))}",
-             f"balanced accuracy {fmt(m['balanced_accuracy'], ci.get('balanced_accuracy'))}",
+             f"balanced accuracy {fmt(m['balanced_accuracy'], ci.get('balanced_accuracy'))}{flag}",
              "per class (recall = the paper's per-class 'precision'):"]
     predicted = np.asarray(m["confusion_matrix"]).sum(axis=0)  # per column: how often each class was predicted
     undefined = False
@@ -350,11 +353,11 @@ def format_metrics(m: dict) -> str:
         lines.append(f"  {lab:>{width}s} " + " ".join(f"{v:>{max(width, 6)}d}" for v in row))
     if undefined:
         lines.append("precision – = undefined: the class is never predicted")
-    words = degenerate_words(degenerate(m))
     if words:
         lines.append("verdict: " + "; ".join(words))
     if ci:
-        lines.append(f"[..] = {ci['level']:.0%} bootstrap intervals ({ci['n_boot']} resamples)")
+        lines.append(f"[..] = {ci['level']:.0%} intervals: {ci.get('method', 'percentile bootstrap')} "
+                     f"({ci['n_boot']} resamples)")
     return "\n".join(lines)
 
 

@@ -4,7 +4,10 @@ Sources of class vectors: sigma_P around the packaged references (``--classes``)
 sigma_P around a calibration's best fit (``--fit CLASS=post.nc``), posterior draws
 (``--posterior CLASS=post.nc``), new drones from a population (``--population
 CLASS=pop.npz``); any of them widened by the specimen model
-(``--specimen-width``). They are rendered under the acquisition (the calibration's
+(``--specimen-width``). One source per class; sources mix (``--posterior
+HELI=post.nc --classes QUAD``: the classes of ``--classes`` then render under the
+calibration's acquisition). A set of one class is refused unless
+``--allow-one-class``. They are rendered under the acquisition (the calibration's
 by default, with the carrier and noise it measured; options in
 :func:`.common.add_acquisition_options`), by the fast path or through the scene
 simulator and the radar chain (``--through-chain``).
@@ -41,15 +44,18 @@ def augmenters_from_args(args) -> tuple[list, dict | None, list[str]]:
     names = [c for c, _ in fits + posts + pops]
     if len(set(names)) != len(names):
         raise ValueError(f"--fit/--posterior/--population name a class twice: {names}")
-    if names and args.classes is not None:
-        raise ValueError("--fit/--posterior/--population give the classes; drop --classes")
+    refs = [] if args.classes is None else args.classes  # sigma_P around the references, beside the files
+    both = sorted(set(names) & set(refs))
+    if both:
+        raise ValueError(f"--classes {','.join(refs)} names {', '.join(both)}, which --fit/--posterior/--population "
+                         "already give: one source per class")
     if pops and args.specimen_width is not None:
         raise ValueError("--specimen-width applies to --fit, --posterior and --classes, not to --population (a "
                          "population's new drones already spread as its measured drones do; the two spreads would "
                          "stack)")
-    if pops and args.sigma_p is not None and not fits:
+    if pops and args.sigma_p is not None and not (fits or refs):
         raise ValueError("--sigma-p applies to sigma_P sources (--classes or --fit), not to --population")
-    if posts and args.sigma_p is not None and not fits:
+    if posts and args.sigma_p is not None and not (fits or refs):
         raise ValueError("--sigma-p applies to sigma_P sources (--classes or --fit), not to --posterior")
     sigma_p = DEFAULT_SIGMA_P if args.sigma_p is None else args.sigma_p
 
@@ -80,8 +86,14 @@ def augmenters_from_args(args) -> tuple[list, dict | None, list[str]]:
             acq, _ = acquisition_from_args(args, pop.measured_acquisition())
             augs.append(augmenter(spec("population", None), cls, calibration=pop, acquisition=acq))
         kinds = ["sigma_p_fit" if f in fits else "posterior" for f in fits + posts] + ["population"] * len(pops)
+        if refs:  # the other classes around their references, under the first calibration's acquisition
+            acq, perturb = acquisition_from_args(args, augs[0].renderer.acquisition)
+            augs += [augmenter(spec("sigma_p_published", perturb), c, acquisition=acq) for c in refs]
+            kinds += ["sigma_p_published"]
         extra = {"strategy": "+".join(sorted({STRATEGIES[k].label for k in kinds})),
                  "posteriors": {c: str(p) for c, p in fits + posts + pops}}
+        if refs:
+            extra["references"] = list(refs)
     else:
         acq, perturb = acquisition_from_args(args)
         classes = list(DEFAULT_CLASSES) if args.classes is None else args.classes
@@ -108,6 +120,20 @@ def check_augment_sizes(args, augmenters) -> None:
             check_size(n, ramps, seconds_each=e * SECONDS_FAST_RAMP, what=f"{aug.label} rendered ramps")
 
 
+def check_two_classes(args, augmenters) -> None:
+    """A training set of one class teaches a classifier nothing: refused before any work
+    unless ``--allow-one-class`` (e.g. one class now, the other in a later file)."""
+    if len(augmenters) >= 2 or args.allow_one_class:
+        return
+    (aug,) = augmenters
+    source = next((f"--{opt} {cls}={path}" for opt in ("fit", "posterior", "population")
+                   for cls, path in (getattr(args, opt) or []) if cls == aug.label), f"--classes {aug.label}")
+    other = next((c for c in DEFAULT_CLASSES if c != aug.label), "OTHER")
+    raise ValueError(f"{source}: the set would hold one class only ({aug.label}); give the other class a source "
+                     f"(--posterior {other}=FILE, --fit {other}=FILE, --population {other}=FILE, or --classes "
+                     f"{other}: sigma_P around its reference), or --allow-one-class to write it anyway")
+
+
 def run_augment(args) -> int:
     import time
 
@@ -117,10 +143,12 @@ def run_augment(args) -> int:
 
     check_paths(inputs=[(f"--{opt} {cls}=", path) for opt in ("fit", "posterior", "population")
                         for cls, path in (getattr(args, opt) or [])],
-                outputs=[Output("--out", args.out, "npz"), Output("--plot", args.plot, "plot")])
+                outputs=[Output("--out", args.out, "npz"), Output("--plot", args.plot, "plot")],
+                overwrite=args.overwrite)
     augmenters, extra, warnings = augmenters_from_args(args)
     check_dataset_memory(augmenters, args.n_per_class, what="--n-per-class")
     check_augment_sizes(args, augmenters)
+    check_two_classes(args, augmenters)
     for text in warnings:
         warn("augment", text)
     info(f"synthesising {args.n_per_class:,} profiles per class of {', '.join(a.label for a in augmenters)}")
@@ -154,8 +182,9 @@ def add_augment(sub, parents, help):
                              "when complete.")
     g = p.add_argument_group("class vectors")
     g.add_argument("--classes", type=class_list, default=None, metavar="LIST",
-                   help="sigma_P around these packaged class references, comma-separated (default: HELI,QUAD "
-                        "when no --fit/--posterior)")
+                   help="sigma_P around these packaged class references, comma-separated; beside --fit/"
+                        "--posterior/--population, the classes they do not give (rendered under the "
+                        "calibration's acquisition) (default: HELI,QUAD when no --fit/--posterior/--population)")
     g.add_argument("--fit", type=posterior_arg, action="append", default=None, metavar="CLASS=FILE",
                    help="sigma_P around the calibrated best fit of a posterior NetCDF (the published method on "
                         "your measurements); repeat per class (default: none)")
@@ -184,6 +213,8 @@ def add_augment(sub, parents, help):
                    help="random seed; the same seed gives the same file bytes (default: %(default)s)")
     g.add_argument("--out", type=Path, required=True, help="output NPZ")
     g.add_argument("--plot", type=Path, default=None, help="also write a PNG of the profiles (default: none)")
+    g.add_argument("--allow-one-class", action="store_true",
+                   help="write a set of one class (default: refuse it; a classifier needs two)")
     add_acquisition_options(p)
     p.set_defaults(func=run_augment)
     return p

@@ -133,7 +133,8 @@ def run_calibrate(args) -> int:
                 outputs=[Output("--out", args.out, "npz" if args.population else "posterior"),
                          Output("--corner", args.corner, "plot"),
                          Output("--trace", args.trace, "plot"),
-                         Output("--backend", backend, "checkpoint", beside=_checkpoint_files(args)[1:])])
+                         Output("--backend", backend, "checkpoint", beside=_checkpoint_files(args)[1:])],
+                overwrite=args.overwrite)
     radar = RadarConfig()
     data = load_profiles(args.measured)
     cls = args.class_name.upper() if args.class_name.upper() in data.classes else args.class_name

@@ -30,6 +30,12 @@ def check_boot_size(n_boot: int, n_predictions: int) -> None:
                what="bootstrap resamples")
 
 
+def drones(ps):
+    """The drone of each profile of a file (its field 'specimen'), the clusters of every
+    bootstrap interval; None when the file does not say (then items are resampled)."""
+    return None if "specimen" not in ps.extra else ps.extra["specimen"]
+
+
 def _check_test(model, test, path):
     x = model.check_input(test.profiles, source=f"{path}: field 'profiles'")
     y = model.check_labels(test.labels, source=f"{path}: field 'labels'")
@@ -43,7 +49,7 @@ def run_train(args) -> int:
     from ..radar import DataFileError
     from .guard import Output, check_paths
 
-    check_paths(inputs=[("DATA", args.data)], outputs=[Output("--out", args.out, "model")])
+    check_paths(inputs=[("DATA", args.data)], outputs=[Output("--out", args.out, "model")], overwrite=args.overwrite)
     cnn = args.model == "cnn"
     data = load_profile_file(args.data, length=CNN_BINS if cnn else None, why="the CNN (1 x 20 x 20 input)")
     if len(data.classes) < 2:
@@ -54,19 +60,39 @@ def run_train(args) -> int:
     info(f"training {args.model} on {len(data)} profiles x {data.profiles.shape[1]} bins "
          f"({', '.join(data.classes)}) from {args.data}")
     model.fit(data.profiles, data.labels)
-    save_model(model, args.out)
-    result(f"trained in {model.train_seconds_:.1f} s; wrote {args.out}")
+    result(f"trained in {model.train_seconds_:.1f} s")
     if cnn:
         s = model.split_scores_
         result(f"best epoch {s['best_epoch']}/{s['epochs_run']}: validation accuracy {s['val_accuracy']:.3f}; "
                f"held-out 10% split ({s['n_test']} profiles) accuracy {s['test_accuracy']:.3f}")
-    result(training_verdict(model, data))
+    verdict, words = training_verdict(model, data)
+    result(verdict)
+    refuse_degenerate(args, verdict, words, f"{args.data}: the {args.model} model trained on it")
+    save_model(model, args.out)
+    result(f"wrote {args.out}")
     return 0
 
 
-def training_verdict(model, data, what: str = "its training profiles", per_class: int = 1000) -> str:
+def refuse_degenerate(args, verdict: str, words: list, what: str) -> None:
+    """A model that recognises no profile of a class of its own training data is not a
+    result: refused (one line naming the file, exit 2, nothing written) unless
+    ``--allow-degenerate``. ``verdict``, ``words``: :func:`training_verdict`'s."""
+    if words and words[0].startswith("degenerate") and not args.allow_degenerate:
+        on = verdict.split(":", 1)[0].removeprefix("verdict ")  # "on 40 of its training profiles"
+        raise ValueError(f"{what} is {words[0]} {on} (recall {verdict.rsplit('(recall ', 1)[1]}; nothing written "
+                         "(give --allow-degenerate to write it anyway)")
+
+
+def add_degenerate_option(p) -> None:
+    p.add_argument("--allow-degenerate", action="store_true",
+                   help="write the model even when it recognises only one class of its own training profiles "
+                        "(default: refuse it, exit status 2)")
+
+
+def training_verdict(model, data, what: str = "its training profiles", per_class: int = 1000) -> tuple[str, list]:
     """The degenerate rule (:func:`mdaug.classify.metrics.degenerate`, the study's) on up
-    to ``per_class`` profiles of each class of ``data`` (evenly spaced), as one line."""
+    to ``per_class`` profiles of each class of ``data`` (evenly spaced): (one line, its
+    words of :func:`mdaug.classify.metrics.degenerate_words`, [] when not degenerate)."""
     import numpy as np
 
     from ..classify.metrics import degenerate, degenerate_words, evaluate
@@ -78,7 +104,7 @@ def training_verdict(model, data, what: str = "its training profiles", per_class
     words = degenerate_words(degenerate(m))
     recalls = ", ".join(f"{c} {pc['recall']:.3f}" for c, pc in m["per_class"].items() if pc["recall"] is not None)
     return (f"verdict on {idx.size} of {what}: "
-            + ("; ".join(words) if words else "not degenerate") + f" (recall {recalls})")
+            + ("; ".join(words) if words else "not degenerate") + f" (recall {recalls})"), words
 
 
 def add_train(sub, parents, help):
@@ -92,6 +118,7 @@ def add_train(sub, parents, help):
                    help="svm, naive Bayes (nb), XGBoost (xgb) or the CNN of SPEC section 6 (400-bin profiles)")
     p.add_argument("--out", type=Path, required=True, help="model file to write (.zip)")
     p.add_argument("--seed", type=seed_int, default=0, help="seed of the model and its splits (default: %(default)s)")
+    add_degenerate_option(p)
     add_classifier_options(p)
     p.set_defaults(func=run_train)
     return p
@@ -105,7 +132,8 @@ def run_evaluate(args) -> int:
     from .guard import Output, check_paths
 
     check_paths(inputs=[("MODEL", args.model), ("TEST", args.test)],
-                outputs=[Output("--json", args.json, "json"), Output("--plot", args.plot, "plot")])
+                outputs=[Output("--json", args.json, "json"), Output("--plot", args.plot, "plot")],
+                overwrite=args.overwrite)
     model = load_model(args.model)
     if model.name == "cnn":
         from ..classify.cnn import resolve_device
@@ -115,7 +143,8 @@ def run_evaluate(args) -> int:
     test = load_profile_file(args.test)
     x, y = _check_test(model, test, args.test)
     check_boot_size(args.n_boot, len(y))
-    m = evaluate(y, model.predict(x), labels=model.classes_.tolist(), n_boot=args.n_boot, random_state=args.seed)
+    m = evaluate(y, model.predict(x), labels=model.classes_.tolist(), n_boot=args.n_boot, random_state=args.seed,
+                 clusters=drones(test))
     result(f"{model.name} model {args.model} on {args.test}")
     result(format_metrics(m))
     if args.json is not None:
@@ -180,7 +209,7 @@ def run_baseline(args) -> int:
         raise ValueError("--test scores the model trained on all of DATA: give --out MODEL too")
     check_paths(inputs=[("DATA", args.data), *(("--test", p) for p in args.test or [])],
                 outputs=[Output("--out", args.out, "model"), Output("--out-set", args.out_set, "npz"),
-                         Output("--json", args.json, "json")])
+                         Output("--json", args.json, "json")], overwrite=args.overwrite)
     data = load_profile_file(args.data, length=CNN_BINS, why="the CNN (1 x 20 x 20 input)")
     if len(data.classes) < 2:
         raise DataFileError(f"{args.data}: field 'labels' holds only class(es) {data.classes}; training needs "
@@ -198,6 +227,30 @@ def run_baseline(args) -> int:
         tests[path] = test
     params = {k: v for k, v in model_params(args, "cnn").items() if k != "epochs"}
     report = {}
+    if args.folds is not None:
+        info(f"tsaug baseline, {args.folds}-fold cross-validation on {args.data} ({len(data)} profiles); "
+             f"augmenting only inside each training fold")
+        pred, _ = tsaug_cross_validate(data.profiles, data.labels, n_splits=args.folds, n_per_class=args.n_per_class,
+                                       random_state=args.seed, epochs=args.epochs, **params)
+        report["cross_validation"] = evaluate(data.labels, pred, random_state=args.seed,
+                                              clusters=drones(data))
+        result(format_metrics(report["cross_validation"]))
+    if args.out is not None:
+        model = tsaug_baseline(data.profiles, data.labels, args.n_per_class, args.seed, epochs=args.epochs, **params)
+        n_aug = args.n_per_class * len(data.classes)
+        result(f"trained the tsaug-baseline CNN on {n_aug:,} tsaug-augmented profiles ({args.n_per_class:,} per "
+               f"class) made from the {len(data)} measured profiles of {args.data}")
+        verdict, words = training_verdict(model, data, f"the measured profiles of {args.data}")
+        result(verdict)
+        refuse_degenerate(args, verdict, words, f"{args.data}: the tsaug-baseline CNN made from it")  # before any file
+        save_model(model, args.out)
+        result(f"wrote {args.out}")
+        for path, test in tests.items():
+            x, y = _check_test(model, test, path)
+            report[str(path)] = evaluate(y, model.predict(x), labels=model.classes_.tolist(), random_state=args.seed,
+                                         clusters=drones(test))
+            result(f"on {path}:")
+            result(format_metrics(report[str(path)]))
     if args.out_set is not None:  # the tsaug set itself, so that any classifier can train on it
         import numpy as np
 
@@ -215,25 +268,6 @@ def run_baseline(args) -> int:
                                         "n_per_class": args.n_per_class, "classes": sorted(set(ys.tolist()))})
         save_dataset(args.out_set, ds)
         result(f"wrote {args.out_set}: {len(ys)} tsaug profiles of {len(data)} measured ones")
-    if args.folds is not None:
-        info(f"tsaug baseline, {args.folds}-fold cross-validation on {args.data} ({len(data)} profiles); "
-             f"augmenting only inside each training fold")
-        pred, _ = tsaug_cross_validate(data.profiles, data.labels, n_splits=args.folds, n_per_class=args.n_per_class,
-                                       random_state=args.seed, epochs=args.epochs, **params)
-        report["cross_validation"] = evaluate(data.labels, pred, random_state=args.seed)
-        result(format_metrics(report["cross_validation"]))
-    if args.out is not None:
-        model = tsaug_baseline(data.profiles, data.labels, args.n_per_class, args.seed, epochs=args.epochs, **params)
-        save_model(model, args.out)
-        n_aug = args.n_per_class * len(data.classes)
-        result(f"trained the tsaug-baseline CNN on {n_aug:,} tsaug-augmented profiles ({args.n_per_class:,} per "
-               f"class) made from the {len(data)} measured profiles of {args.data}; wrote {args.out}")
-        result(training_verdict(model, data, f"the measured profiles of {args.data}"))
-        for path, test in tests.items():
-            x, y = _check_test(model, test, path)
-            report[str(path)] = evaluate(y, model.predict(x), labels=model.classes_.tolist(), random_state=args.seed)
-            result(f"on {path}:")
-            result(format_metrics(report[str(path)]))
     if args.json is not None:
         payload = json.dumps(report, indent=1).encode()
         atomic_write(args.json, lambda fh: fh.write(payload))
@@ -260,6 +294,7 @@ def add_baseline(sub, parents, help):
                         "any classifier (mdaug train) can use it (default: none)")
     p.add_argument("--json", type=Path, default=None, help="also write the metrics as JSON (default: none)")
     p.add_argument("--seed", type=seed_int, default=0, help="seed of augmentation and CNN (default: %(default)s)")
+    add_degenerate_option(p)
     add_classifier_options(p, epochs_default=100, cnn_only=True)
     p.set_defaults(func=run_baseline)
     return p

@@ -61,11 +61,19 @@ class HelpFormatter(argparse.HelpFormatter):
         return "\n\n".join(paras)
 
 
-def add_verb(sub, name: str, parents, *, help: str, description: str, interrupted, epilog: str | None = None):
-    """One verb's parser with the global options, and what to say when it is interrupted
+OVERWRITE_HELP = ("replace output files that exist already (default: refuse them, naming the file; nothing is "
+                  "written)")
+
+
+def add_verb(sub, name: str, parents, *, help: str, description: str, interrupted, epilog: str | None = None,
+             overwrite: str = OVERWRITE_HELP):
+    """One verb's parser with the global options, ``--overwrite`` (``overwrite``: its
+    help; the rule is :func:`.guard.check_paths`'s, which every verb calls with
+    ``overwrite=args.overwrite``), and what to say when it is interrupted
     (``interrupted(args) -> str``)."""
     p = sub.add_parser(name, help=help, description=description, epilog=epilog, parents=parents,
                        formatter_class=HelpFormatter)
+    p.add_argument("--overwrite", action="store_true", help=overwrite)
     p.set_defaults(interrupted=interrupted)
     return p
 

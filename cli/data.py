@@ -59,7 +59,7 @@ def run_simulate(args) -> int:
     from ..radar.seeds import child_seed
     from .guard import Output, check_paths
 
-    check_paths(outputs=[Output("--out", args.out, "npz")])
+    check_paths(outputs=[Output("--out", args.out, "npz")], overwrite=args.overwrite)
     radar = RadarConfig()
     for cls in args.class_name:
         load_reference(cls)  # unknown class: fail before any work
@@ -161,7 +161,8 @@ def run_process(args) -> int:
     from ..radar.raw import read_raw
     from .guard import Output, check_paths
 
-    check_paths(inputs=[("RAW", p) for p in args.raw], outputs=[Output("--out", args.out, "npz")])
+    check_paths(inputs=[("RAW", p) for p in args.raw], outputs=[Output("--out", args.out, "npz")],
+                overwrite=args.overwrite)
     radar, chain = RadarConfig(), chain_from_args(args)
     raws = []
     for path in args.raw:  # read and check every file before processing any

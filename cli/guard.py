@@ -9,7 +9,12 @@ writes inside the folder) is checked against every input and every other output:
   NetCDF, ZIP, JSON, HDF5; or none) or a figure format matplotlib writes;
 * its folder exists and is writable, and the path is not a folder;
 * every file name, input or output, is valid UTF-8 (mdaug records names in its
-  outputs' settings).
+  outputs' settings);
+* no output file exists already, unless the command was given ``--overwrite`` (every
+  verb has it, :func:`.common.add_verb`): no silent overwrite. Outputs a command
+  resumes from are exempt: a chain checkpoint, a work folder's caches (``inside``
+  names ending in ``/``) and a folder whose own rule decides (``resumes``: the
+  study's folder, :func:`mdaug.reports.identity.check_study_folder`).
 
 Nothing heavy is imported: the guard runs in milliseconds.
 """
@@ -43,13 +48,15 @@ class Output:
     """One output of a command: ``option`` (e.g. ``--out``), ``path`` (None = not asked
     for), ``kind`` (a key of :data:`KINDS`), and for a folder the files written in it
     (``inside``, relative names; a name ending in ``/`` is a subfolder it fills) and further files written beside a file (``beside``,
-    full paths, e.g. a checkpoint's fit)."""
+    full paths, e.g. a checkpoint's fit). ``resumes``: the command resumes from what
+    the output holds (its own rule decides), so an existing one is not refused."""
 
     option: str
     path: object
     kind: str
     inside: tuple = ()
     beside: tuple = field(default_factory=tuple)
+    resumes: bool = False
 
 
 def shown(path) -> str:
@@ -116,9 +123,25 @@ def _check_file(out: Output) -> None:
     check_writable(out.path)
 
 
-def check_paths(inputs=(), outputs=()) -> None:
+def _check_existing(out: Output) -> None:
+    """The one no-silent-overwrite rule: an output file that exists is refused."""
+    if out.resumes or out.kind == "checkpoint":
+        return
+    if out.kind == "folder":
+        files = [Path(out.path) / name for name in out.inside if not name.endswith("/")]
+    else:
+        files = [Path(out.path)]
+    for path in files + [Path(p) for p in out.beside]:
+        if os.path.lexists(path):
+            where = "" if path == Path(out.path) else f" (a file {out.option} {shown(out.path)} would hold)"
+            raise _error(f"{shown(path)}: {out.option}: the file exists{where}; give --overwrite to replace it, "
+                         "or choose another path")
+
+
+def check_paths(inputs=(), outputs=(), overwrite: bool = False) -> None:
     """Refuse, before any work, a command whose outputs would overwrite an input or
-    each other, or cannot be written (see the module doc).
+    each other, or cannot be written, or exist already (unless ``overwrite``, the
+    verb's ``--overwrite``) (see the module doc).
 
     inputs: (option or role, path) pairs (None paths skipped); outputs:
     :class:`Output` objects. Raises :class:`mdaug.radar.DataFileError` naming the
@@ -157,6 +180,9 @@ def check_paths(inputs=(), outputs=()) -> None:
             if _same(o_id, o2_id):
                 raise _error(f"{shown(o_path)}: {o_opt} and {o2_opt} {shown(o2_path)} are the same file; two "
                              "outputs of one command need two paths")
-    for out in outputs:  # formats last: a clash with an input is the graver news
+    for out in outputs:  # formats after: a clash with an input is the graver news
         if out.kind != "folder":
             _check_format(out)
+    if not overwrite:
+        for out in outputs:
+            _check_existing(out)

@@ -111,7 +111,8 @@ def run_study(args) -> int:
 
     from .guard import Output, check_paths
 
-    check_paths(inputs=[("--config", args.config)], outputs=[Output("--out", args.out, "folder", inside=STUDY_FILES)])
+    check_paths(inputs=[("--config", args.config)],  # the study resumes: its folder's own rule (identity) decides
+                outputs=[Output("--out", args.out, "folder", inside=STUDY_FILES, resumes=True)])
     out = Path(args.out)
     cfg = load_config(args.config) if args.config else StudyConfig()
     if args.seed is not None:
@@ -141,7 +142,7 @@ def run_study(args) -> int:
     data_files = [(f"[data] {group}.{name}", path) for group in ("calibration", "select", "test")
                   for name, path in (getattr(cfg.data, group) or {}).items()]
     check_paths(inputs=[("--config", args.config), *data_files],
-                outputs=[Output("--out", out, "folder", inside=STUDY_FILES)])
+                outputs=[Output("--out", out, "folder", inside=STUDY_FILES, resumes=True)])
     if check_study_folder(out, cfg, overwrite=args.overwrite):  # another study: refused, or replaced when asked
         clear_study(out)
         info(f"{out}: the other study's files were removed (--overwrite)")
@@ -168,6 +169,8 @@ def _interrupted(args) -> str:
 
 def add_run(sub, parents, help):
     p = add_verb(sub, "run", parents, help=help, interrupted=_interrupted,
+                 overwrite="when --out holds another study (other data, seed, classes or scene), remove its files "
+                           "and run this one (default: refuse; the same study always resumes)",
                  description="Calibrate each class, synthesise training sets (sigma_P and posterior), train the "
                              "classifiers and the CNN, compare against tsaug, report. The configuration is checked "
                              "in full before the output folder is created; an interrupted run resumes from "
@@ -178,9 +181,6 @@ def add_run(sub, parents, help):
     p.add_argument("--out", type=Path, default=Path("mdaug-study"),
                    help="output folder, created if needed (default: %(default)s)")
     p.add_argument("--quick", action="store_true", help="small sizes: a run of one to two minutes")
-    p.add_argument("--overwrite", action="store_true",
-                   help="when --out holds another study (other data, seed, classes or scene), remove its files "
-                        "and run this one (default: refuse; the same study always resumes)")
     p.add_argument("--ramps", type=positive_int, default=None, metavar="K",
                    help="the study's K, ramps per frame: of the simulated campaign (default: the config's, 32; 4 "
                         "gives the 4-ramp campaign), or of measured files that do not state ramps_per_frame (one "

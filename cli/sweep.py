@@ -73,7 +73,7 @@ def run_sweep(args) -> int:
     from .guard import Output, check_paths
 
     check_paths(inputs=[*(("--test", p) for p in args.test), ("--select", args.select)],
-                outputs=[Output("--out", args.out, "folder", inside=SWEEP_FILES)])
+                outputs=[Output("--out", args.out, "folder", inside=SWEEP_FILES)], overwrite=args.overwrite)
     out = Path(args.out)
     for c in args.classes:
         load_reference(c)  # unknown class: fail before any work

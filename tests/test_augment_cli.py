@@ -33,7 +33,7 @@ def test_same_seed_same_file_bytes(tmp_path):
     a, b = tmp_path / "a.npz", tmp_path / "b.npz"
     for path in (a, b):
         assert main(["augment", "--classes", "QUAD", "--n-per-class", "30", "--seed", "9",
-                     "--phases", "uniform", "--range-jitter", "1", "--out", str(path)]) == 0
+                     "--phases", "uniform", "--range-jitter", "1", "--allow-one-class", "--out", str(path)]) == 0
     with np.load(a) as fa, np.load(b) as fb:
         for key in fa.files:
             assert fa[key].tobytes() == fb[key].tobytes(), key
@@ -61,7 +61,7 @@ def test_outputs_get_the_usual_file_mode(tmp_path):
     import os
 
     out = tmp_path / "m.npz"
-    assert main(["augment", "--classes", "HELI", "--n-per-class", "3", "--out", str(out)]) == 0
+    assert main(["augment", "--classes", "HELI", "--n-per-class", "3", "--allow-one-class", "--out", str(out)]) == 0
     mask = os.umask(0)
     os.umask(mask)
     assert (out.stat().st_mode & 0o777) == (0o666 & ~mask)

@@ -102,7 +102,7 @@ def test_global_options_before_and_after_the_verb(argv, threads, quiet, monkeypa
 def test_augment_accepts_threads_and_quiet_after_the_verb(tmp_path, capsys, monkeypatch):
     monkeypatch.delenv(QUIET_ENV, raising=False)
     out = tmp_path / "a.npz"
-    assert main(["augment", "--classes", "HELI", "--n-per-class", "3", "--out", str(out), "--threads", "1",
+    assert main(["augment", "--classes", "HELI,QUAD", "--n-per-class", "3", "--out", str(out), "--threads", "1",
                  "--quiet"]) == 0
     assert out.is_file() and "wrote" in capsys.readouterr().out
     assert QUIET_ENV not in os.environ  # --quiet applies to that one command
@@ -114,7 +114,7 @@ def _interrupt(*_a, **_k):
 
 
 @pytest.mark.parametrize("verb, target, argv, says, never", [
-    ("augment", "mdaug.generator.dataset.make_dataset", ["--classes", "HELI", "--n-per-class", "3"],
+    ("augment", "mdaug.generator.dataset.make_dataset", ["--classes", "HELI,QUAD", "--n-per-class", "3"],
      "augment does not resume", "rerun to resume"),
     ("calibrate", "mdaug.inference.calibrate.calibrate", ["--class", "HELI"],
      "chain checkpoint", None),

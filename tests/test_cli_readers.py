@@ -254,7 +254,7 @@ def test_a_full_disk_names_the_output(verb, d, tmp_path, monkeypatch, refused):
     argv, target = {
         "process": (["process", f"{d}/raw_int64.npz"], None),
         "simulate": (["simulate", "--class", "HELI", "--acquisitions", "1", "--ramps", "1"], None),
-        "augment": (["augment", "--classes", "HELI", "--n-per-class", "3"], None),
+        "augment": (["augment", "--classes", "HELI", "--n-per-class", "3", "--allow-one-class"], None),
         "train": (["train", f"{d}/m.npz", "--model", "nb"], None),
         "evaluate": (["evaluate", f"{d}/nb.zip", f"{d}/m.npz", "--n-boot", "0", "--json"], None),
     }[verb]
@@ -329,7 +329,7 @@ def test_baseline_says_what_it_trained_on(d, tmp_path, capsys):
     from mdaug.cli import main
 
     assert main(["baseline", f"{d}/m.npz", "--n-per-class", "12", "--epochs", "1", "--out",
-                 str(tmp_path / "b.zip")]) == 0
+                 str(tmp_path / "b.zip"), "--allow-degenerate"]) == 0  # one epoch: a toy model
     out = capsys.readouterr().out
     assert "on 24 tsaug-augmented profiles (12 per class) made from the 20 measured profiles" in out
     assert "all 20 profiles" not in out
@@ -399,7 +399,7 @@ def test_augment_through_the_chain_draws_a_bar_on_a_terminal(tmp_path, monkeypat
     monkeypatch.setattr(sys, "stderr", tty)
     monkeypatch.delenv("MDAUG_QUIET", raising=False)
     assert main(["augment", "--classes", "HELI", "--n-per-class", "300", "--through-chain", "--acquisition",
-                 "measured", "--ramps", "1", "--out", str(tmp_path / "c.npz")]) == 0
+                 "measured", "--ramps", "1", "--allow-one-class", "--out", str(tmp_path / "c.npz")]) == 0
     text = tty.getvalue()
     assert "HELI profiles" in text and "/300" in text
     assert sum(calls) == 300 and len([c for c in calls if c]) > 2, calls  # it moves block by block, not at the end

@@ -64,18 +64,44 @@ def test_evaluate_calls_an_always_one_class_model_degenerate_and_writes_null(d, 
 def test_train_calls_a_model_of_identical_profiles_degenerate(d, capsys):
     same = np.load(d / "same.npz")
     atomic_savez(d / "same_train.npz", profiles=same["profiles"], labels=same["labels"])
-    assert main(["train", str(d / "same_train.npz"), "--model", "nb", "--out", str(d / "same.zip")]) == 0
+    assert main(["train", str(d / "same_train.npz"), "--model", "nb", "--out", str(d / "same.zip"),
+                 "--allow-degenerate"]) == 0
     (line,) = _verdicts(capsys.readouterr().out)
     assert line.startswith("verdict on 40 of its training profiles: degenerate: recognises no ")
+    assert (d / "same.zip").is_file()
+
+
+@pytest.mark.parametrize("model", ["nb", "svm"])
+def test_train_refuses_a_degenerate_model_unless_allowed(d, tmp_path, model, refused):
+    """Issue 39 item 3: a model that recognises one class only of its own training data is
+    not a success: exit 2, one line naming the file, the reason and the option; no model."""
+    same = np.load(d / "same.npz")
+    inputs = tmp_path / "in"
+    inputs.mkdir()
+    atomic_savez(inputs / "same_train.npz", profiles=same["profiles"], labels=same["labels"])
+    out = tmp_path / "out"
+    out.mkdir()
+    line = refused(["train", str(inputs / "same_train.npz"), "--model", model, "--out", str(out / "m.zip")],
+                   inputs, out, [f"{inputs / 'same_train.npz'}: the {model} model trained on it is degenerate: "
+                                 "recognises no ", "on 40 of its training profiles", "--allow-degenerate",
+                                 "nothing written"], seconds=60)
+    assert "recall HELI" in line and not (out / "m.zip").exists()
 
 
 def test_baseline_calls_its_degenerate_model_so(d, capsys):
-    assert main(["baseline", str(d / "same.npz"), "--n-per-class", "20", "--epochs", "1", "--out",
-                 str(d / "b.zip"), "--test", str(d / "same.npz"), "--json", str(d / "b.json")]) == 0
+    out = d / "bl"
+    out.mkdir()
+    argv = ["baseline", str(d / "same.npz"), "--n-per-class", "20", "--epochs", "1", "--out", str(out / "b.zip"),
+            "--test", str(d / "same.npz"), "--json", str(out / "b.json"), "--out-set", str(out / "b.npz")]
+    assert main(argv) == 2  # refused after training, before any file: nothing left behind
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "same.npz: the tsaug-baseline CNN made from it is degenerate" in err
+    assert "--allow-degenerate" in err and list(out.iterdir()) == []
+    assert main(argv + ["--allow-degenerate"]) == 0
     lines = _verdicts(capsys.readouterr().out)
     assert len(lines) == 2  # on the measured profiles it was made from, and on the --test file
     assert "of the measured profiles of" in lines[0] and "degenerate: recognises no" in lines[0]
     assert lines[1].startswith("verdict: degenerate: recognises no ")
-    report = json.loads((d / "b.json").read_text())
+    report = json.loads((out / "b.json").read_text())
     (m,) = report.values()
     assert None in [pc["precision"] for pc in m["per_class"].values()]

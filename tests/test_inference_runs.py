@@ -171,7 +171,7 @@ def test_cli_calibrate_and_posterior_augment(tmp_path, capsys):
     assert "DRONEX" in capsys.readouterr().err
     aug = tmp_path / "aug.npz"
     assert main(["augment", "--posterior", f"HELI={out}", "--n-per-class", "50", "--seed", "1",
-                 "--out", str(aug)]) == 0
+                 "--allow-one-class", "--out", str(aug)]) == 0
     ds = load_dataset(aug)
     assert ds.profiles.shape == (50, 400) and ds.settings["strategy"] == "posterior"
     assert ds.params["HELI"].shape == (50, N_PARAMS)
@@ -179,7 +179,8 @@ def test_cli_calibrate_and_posterior_augment(tmp_path, capsys):
     assert main(["augment", "--posterior", f"QUAD={out}", "--n-per-class", "5", "--out", str(aug)]) == 2
     assert "expected 'QUAD'" in capsys.readouterr().err
     # without --posterior the sigma_P path still runs
-    assert main(["augment", "--classes", "HELI", "--n-per-class", "5", "--out", str(tmp_path / "s.npz")]) == 0
+    assert main(["augment", "--classes", "HELI", "--n-per-class", "5", "--allow-one-class",
+                 "--out", str(tmp_path / "s.npz")]) == 0
     assert load_dataset(tmp_path / "s.npz").settings["strategy"] == "sigma_p"
 
 

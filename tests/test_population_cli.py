@@ -31,12 +31,13 @@ def test_calibrate_population_keeps_each_drone_and_reuses_it(drones, capsys):
     from mdaug.inference.result.posterior import CalibrationResult
     assert CalibrationResult.load(drones / "pop.npz.drone-1.nc").specimens == ["1"]
     assert main(["calibrate", str(drones / "d.npz"), "--class", "HELI", "--population", *FAST,
-                 "--out", str(out)]) == 0
+                 "--out", str(out), "--overwrite"]) == 0  # the population file is replaced; the drones reused
     again = capsys.readouterr().out
     assert "drone 0: reused" in again and "drone 1: reused" in again and "calibrating from" not in again
 
     aug = drones / "set.npz"
-    assert main(["augment", "--population", f"HELI={out}", "--n-per-class", "50", "--out", str(aug)]) == 0
+    assert main(["augment", "--population", f"HELI={out}", "--n-per-class", "50", "--allow-one-class",
+                 "--out", str(aug)]) == 0
     with np.load(aug, allow_pickle=False) as z:
         assert z["profiles"].shape == (50, 400)
         settings = json.loads(str(z["settings"]))
@@ -57,7 +58,10 @@ def test_population_from_the_trained_estimator_by_default(drones, capsys):
     pop = PopulationResult.load(out, class_name="HELI")
     assert pop.n_drones == 2 and pop.spreads().shape[1] == 5 and np.all(pop.spreads() > 0)
     assert main(["calibrate", str(drones / "d.npz"), "--class", "HELI", "--population", "--seed", "4",
-                 "--out", str(out)]) == 0
+                 "--out", str(out)]) == 2  # no silent overwrite of the population file
+    assert "--out: the file exists" in capsys.readouterr().err
+    assert main(["calibrate", str(drones / "d.npz"), "--class", "HELI", "--population", "--seed", "4",
+                 "--out", str(out), "--overwrite"]) == 0  # the population file is replaced; the drones reused
     again = capsys.readouterr().out
     assert "drone 0: reused" in again and "drone 1: reused" in again
 
