@@ -101,8 +101,7 @@ def run_train(args) -> int:
     cls = _class(args.class_name)
     device_of(args.device)  # refuses cuda without a GPU, before any work
     check_estimator_sizes(args)
-    check_paths(outputs=[Output("--out", args.out, "model"), Output("--work", _work(args), "folder")],
-                overwrite=args.overwrite)
+    check_paths(outputs=[Output("--out", args.out, "model"), Output("--work", _work(args), "folder")])
     spec = SimulationSpec(cls, Acquisition.measured(args.ramps), args.measurements)
     cfg = default_training()
     if args.epochs is not None:
@@ -133,9 +132,13 @@ def run_sbc(args) -> int:
     cls = _class(args.class_name)
     check_estimator_sizes(args)
     check_paths(inputs=[("--estimator", args.estimator)], outputs=[Output("--json", args.json, "json"),
-                                                                    Output("--figure", args.figure, "plot")],
-                overwrite=args.overwrite)
+                                                                    Output("--figure", args.figure, "plot")])
     est = find(cls, Acquisition.measured(args.ramps), path=args.estimator)
+    from ..radar import RadarConfig
+
+    where = "the shipped estimator" if args.estimator is None else f"--estimator {args.estimator}"
+    est.check_acquisition(Acquisition.measured(args.ramps), RadarConfig(),  # calibrate's own check of its data
+                          f"--ramps {args.ramps} with {where}")
     settings = CalibrationSettings(progress=False, time_budget=args.time_budget)
     out = estimator_sbc(est, args.truths, seed=args.seed, workers=args.workers, mcmc_truths=args.emcee_truths,
                         mcmc_settings=settings, progress=progress_enabled(), log=info)

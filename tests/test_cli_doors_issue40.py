@@ -165,3 +165,111 @@ def test_options_that_do_not_apply_are_refused(case, io_dirs, refused):
     (d / "select_class.toml").write_text('[data]\ncalibration = { HELI = "m.npz", QUAD = "m.npz" }\n'
                                          'select = { DRONE = "m.npz", QUAD = "m.npz" }\ntest = { new = "m.npz" }\n')
     refused([a.format(d=d, o=out) for a in argv], d, out, must, seconds=10)
+
+
+# ---- 3. estimator files: untrusted input, all the way ----------------------------------------------
+class _Payload:
+    """A pickle that would create a file if it were ever run."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        import pathlib
+
+        return pathlib.Path.touch, (pathlib.Path(self.marker),)
+
+
+@pytest.fixture(scope="module")
+def estimators(tmp_path_factory):
+    """Tampered copies of the shipped HELI K = 4 estimator (and a K = 32 one), in one folder."""
+    import json
+    import os
+    import pickle
+    import shutil
+    import zipfile
+
+    from mdaug.inference.amortized.shipped import shipped_path
+
+    d = tmp_path_factory.mktemp("estimators")
+    with zipfile.ZipFile(shipped_path("HELI", 4)) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    meta = json.loads(members["meta.json"])
+
+    def write(name, **change):
+        m = dict(members)
+        m.update({k.replace("_", "."): v if isinstance(v, bytes) else json.dumps(v).encode()
+                  for k, v in change.items()})
+        with zipfile.ZipFile(d / name, "w", zipfile.ZIP_DEFLATED) as z:
+            for k, v in m.items():
+                z.writestr(k, v)
+
+    def edited(**fields):
+        return {**json.loads(members["meta.json"]), **fields}
+
+    write("pickle.zip", posterior_pt=pickle.dumps(_Payload(d / "RAN")))
+    write("garbage.zip", ratio_pt=b"garbage" * 100)
+    write("list.zip", ratio_pt=_torch_bytes([1, 2]))
+    write("bomb.zip", meta_json=b" " * (64 * 2 ** 20) + b"{}")  # 64 MB of spaces, deflated to ~64 KB
+    write("target.zip", meta_json=edited(target=99))
+    write("class.zip", meta_json=edited(spec={**meta["spec"], "class_name": "QUAD"}))
+    write("class_foo.zip", meta_json=edited(spec={**meta["spec"], "class_name": "FOO"}))
+    write("nan_prior.zip", meta_json=json.dumps(edited(prior={**meta["prior"], "gamma0": float("nan")})).encode())
+    write("seed.zip", meta_json=edited(seed="zero"))
+    write("json.zip", meta_json=b"{not json")
+    os.symlink("/dev/zero", d / "dev.zip")
+    os.mkfifo(d / "fifo.zip")
+    shutil.copy(shipped_path("HELI", 32), d / "k32.zip")
+    atomic_savez(d / "m.npz", profiles=_profiles(3), labels=np.array(["HELI"] * 3), ramps_per_frame=np.array(4))
+    return d
+
+
+def _torch_bytes(obj) -> bytes:
+    import io
+
+    import torch
+
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    return buf.getvalue()
+
+
+ESTIMATOR_CASES = [
+    ("pickle", "pickle.zip", ["pickle.zip: member 'posterior.pt' is not a state dict of plain tensors",
+                              "refused without being run"]),
+    ("garbage-weights", "garbage.zip", ["garbage.zip: member 'ratio.pt' is not a state dict"]),
+    ("not-a-state-dict", "list.zip", ["list.zip: member 'ratio.pt' is not a table of named tensors"]),
+    ("zip-bomb-meta", "bomb.zip", ["bomb.zip: member 'meta.json' declares 67,108,866 bytes", "at most"]),
+    ("unknown-target", "target.zip", ["target.zip: meta.json field 'target' is 99: not a target version"]),
+    ("class-name-edited", "class.zip", ["class.zip: meta.json field 'spec.class_name' is 'QUAD' but its field "
+                                        "'prior' is class HELI's"]),
+    ("class-name-unknown", "class_foo.zip", ["class_foo.zip: meta.json field 'spec.class_name' is 'FOO'"]),
+    ("nan-prior", "nan_prior.zip", ["nan_prior.zip: meta.json field 'prior' holds NaN"]),
+    ("seed-text", "seed.zip", ["seed.zip: meta.json field 'seed' is 'zero'"]),
+    ("meta-not-json", "json.zip", ["json.zip: member 'meta.json' is not JSON"]),
+    ("device", "dev.zip", ["dev.zip: is a device, not an estimator file", "not read"]),
+    ("fifo", "fifo.zip", ["fifo.zip: is a FIFO, not an estimator file"]),
+    ("folder", ".", ["is a folder, not an estimator file"]),
+    ("sbc-ramps-against-file", "k32.zip", ["--ramps 4 with --estimator", "k32.zip: acquisition field 'ramps' is 4 "
+                                           "but the estimator was trained for 32"]),
+]
+
+
+@pytest.mark.parametrize("case", ESTIMATOR_CASES, ids=[c[0] for c in ESTIMATOR_CASES])
+def test_sbc_reads_an_estimator_file_as_untrusted_input(case, estimators, tmp_path, refused):
+    _, name, must = case
+    out = tmp_path / "out"
+    out.mkdir()
+    refused(["sbc", "--class", "HELI", "--ramps", "4", "--truths", "2", "--estimator", str(estimators / name),
+             "--json", str(out / "s.json")], estimators, out, must, seconds=15)
+    assert not (estimators / "RAN").exists()
+
+
+@pytest.mark.parametrize("name,must", [("pickle.zip", ["member 'posterior.pt'"]), ("dev.zip", ["is a device"]),
+                                       ("class.zip", ["'spec.class_name' is 'QUAD'"])])
+def test_calibrate_reads_an_estimator_file_as_untrusted_input(name, must, estimators, tmp_path, refused):
+    out = tmp_path / "out"
+    out.mkdir()
+    refused(["calibrate", str(estimators / "m.npz"), "--class", "HELI", "--out", str(out / "p.nc"),
+             "--estimator", str(estimators / name)], estimators, out, must, seconds=15)
+    assert not (estimators / "RAN").exists()

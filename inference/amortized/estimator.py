@@ -75,6 +75,16 @@ class AmortizedEstimator:
     # ---- use ------------------------------------------------------------------------------
     def check_data(self, profiles: np.ndarray, acquisition: Acquisition, radar: RadarConfig, source: str) -> None:
         """Refuse (EstimatorError naming the field) data this estimator was not trained for."""
+        self.check_acquisition(acquisition, radar, source)
+        n = np.asarray(profiles).shape[0]
+        if not 1 <= n <= self.max_measurements:
+            raise EstimatorError(f"{source}: {n} measurements; the estimator takes 1 to {self.max_measurements} "
+                                 "of one drone")
+
+    def check_acquisition(self, acquisition: Acquisition, radar: RadarConfig, source: str) -> None:
+        """Refuse (EstimatorError naming the field) an acquisition or radar this estimator
+        was not trained for (``source``: the data file, or the option that stated it);
+        the one check of calibrate's data and of sbc's options."""
         want = self.spec.acquisition.to_dict()
         got = acquisition.to_dict()
         diff = [k for k in want if want[k] != got.get(k)]
@@ -86,10 +96,6 @@ class AmortizedEstimator:
         if radar.to_dict() != self.spec.radar.to_dict():
             raise EstimatorError(f"{source}: the radar configuration differs from the estimator's (field 'radar'); "
                                  f"train one with: {train_command(self.spec)}")
-        n = np.asarray(profiles).shape[0]
-        if not 1 <= n <= self.max_measurements:
-            raise EstimatorError(f"{source}: {n} measurements; the estimator takes 1 to {self.max_measurements} "
-                                 "of one drone")
 
     def condition(self, profiles: np.ndarray) -> torch.Tensor:
         """Prepared profiles (M, L) -> the flow's condition (1, M_max, L) (NaN rows pad)."""
@@ -169,26 +175,33 @@ class AmortizedEstimator:
 
     @classmethod
     def load(cls, path, *, device: str = "cpu") -> "AmortizedEstimator":
-        """Read and check an estimator file (module doc); EstimatorError names the
-        file and the field."""
+        """Read and check an estimator file (module doc) as untrusted input: a regular
+        file only (a device, FIFO or folder is refused without being opened), each
+        member's declared size bounded before it is decompressed, the weights read
+        without pickle (any error of the reader: one line naming the member), every
+        meta field checked against the values this mdaug knows. EstimatorError names
+        the file and the member or field."""
         path = Path(path)
         src = str(path)
+        _check_regular(path, src)
         try:
             with zipfile.ZipFile(path) as z:
                 names = set(z.namelist())
                 missing = [m for m in MEMBERS if m not in names]
                 if missing:
                     raise EstimatorError(f"{src}: not an mdaug estimator (member {missing[0]!r} missing)")
-                meta = json.loads(z.read("meta.json"))
-                states = {m: torch.load(io.BytesIO(z.read(m)), map_location=device, weights_only=True)
-                          for m in MEMBERS[1:]}
-        except FileNotFoundError:
-            raise EstimatorError(f"{src}: no such estimator file") from None
+                blobs = {m: _read_member(z, m, src) for m in MEMBERS}
         except EstimatorError:
             raise
-        except (zipfile.BadZipFile, OSError, EOFError, RuntimeError, ValueError, KeyError) as exc:
-            raise EstimatorError(f"{src}: not a readable mdaug estimator ({type(exc).__name__}: "
-                                 f"{str(exc).splitlines()[0][:120] if str(exc) else 'truncated or damaged'})") from None
+        except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, RuntimeError, ValueError, KeyError,
+                NotImplementedError) as exc:
+            raise EstimatorError(f"{src}: not a readable mdaug estimator ({_first_line(exc, 'truncated or damaged')})"
+                                 ) from None
+        try:
+            meta = json.loads(blobs["meta.json"])
+        except (ValueError, RecursionError) as exc:
+            raise EstimatorError(f"{src}: member 'meta.json' is not JSON ({_first_line(exc)})") from None
+        states = {m: _load_state(blobs[m], m, src, device) for m in MEMBERS[1:]}
         if not isinstance(meta, dict):
             raise EstimatorError(f"{src}: member 'meta.json' is not a JSON table")
         absent = [k for k in META_FIELDS if k not in meta]
@@ -196,17 +209,12 @@ class AmortizedEstimator:
             raise EstimatorError(f"{src}: meta.json field {absent[0]!r} is missing")
         if meta["format"] != FORMAT:
             raise EstimatorError(f"{src}: meta.json field 'format' is {meta['format']!r}; expected {FORMAT!r}")
-        try:
-            spec = spec_from_dict(meta["spec"])
-            net_cfg = NetConfig.from_dict(meta["net"])
-        except (KeyError, TypeError, ValueError) as exc:
-            raise EstimatorError(f"{src}: meta.json field 'spec' or 'net' is not valid ({exc})") from None
+        spec, net_cfg = _spec_and_net(meta, src)
         if meta["spec"].get("simulator") != SIMULATOR:
             raise EstimatorError(f"{src}: meta.json field 'spec.simulator' is {meta['spec'].get('simulator')!r}; "
                                  f"this mdaug simulates {SIMULATOR!r}; retrain with: {train_command(spec)}")
-        if Priors.from_dict(meta["prior"]).to_dict() != spec.priors().to_dict():
-            raise EstimatorError(f"{src}: meta.json field 'prior' differs from the class reference's prior; "
-                                 f"retrain with: {train_command(spec)}")
+        _check_prior(meta, spec, src)
+        _check_fields(meta, src)
         ref = spec.reference
         if ref.n_engines > 1 and meta.get("target", 1) != TARGET:  # one engine: every version is the same
             raise EstimatorError(f"{src}: meta.json field 'target' is {meta.get('target', 1)!r}: its quantities "
@@ -230,3 +238,151 @@ class AmortizedEstimator:
         est.ratio.eval()
         est.meta = meta
         return est
+
+
+# ---- reading a file as untrusted input -------------------------------------------------------------
+MEMBER_LIMITS = {"meta.json": 16 * 2 ** 20, "posterior.pt": 512 * 2 ** 20, "ratio.pt": 512 * 2 ** 20}
+"""Largest size (bytes, uncompressed) of each member, checked against the ZIP's
+declared size before any byte is decompressed and again while reading (the shipped
+files: meta.json 40-130 KB, weights 0.6-3 MB)."""
+KNOWN_TARGETS = tuple(range(1, TARGET + 1))
+"""Target versions there have been (:mod:`.target`); a several-engine file must be of
+this one, a one-engine file of any of them (they agree for one engine)."""
+
+
+def _first_line(exc: BaseException, empty: str = "") -> str:
+    text = str(exc).strip()
+    return f"{type(exc).__name__}: {text.splitlines()[0][:120] if text else empty or 'no detail'}"
+
+
+def _check_regular(path: Path, src: str) -> None:
+    """A regular file, found without opening it (a FIFO or /dev/zero would hang or never end)."""
+    import os
+    import stat
+
+    try:
+        st = os.stat(path)  # follows links: a link to a device is a device
+    except FileNotFoundError:
+        raise EstimatorError(f"{src}: no such estimator file") from None
+    except OSError as exc:
+        raise EstimatorError(f"{src}: cannot read the estimator file ({exc.strerror or exc})") from None
+    if not stat.S_ISREG(st.st_mode):
+        kind = ("a folder" if stat.S_ISDIR(st.st_mode) else "a FIFO" if stat.S_ISFIFO(st.st_mode) else
+                "a device" if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else
+                "a socket" if stat.S_ISSOCK(st.st_mode) else "not a regular file")
+        raise EstimatorError(f"{src}: is {kind}, not an estimator file (a ZIP of mdaug train-estimator); it was "
+                             "not read")
+
+
+def _read_member(z: zipfile.ZipFile, name: str, src: str) -> bytes:
+    """A member's bytes, its declared size bounded before decompression and the bytes
+    read bounded too (a ZIP bomb stops at the limit)."""
+    info = z.getinfo(name)
+    limit = MEMBER_LIMITS[name]
+    if info.file_size > limit:
+        raise EstimatorError(f"{src}: member {name!r} declares {info.file_size:,} bytes; an estimator's {name} holds "
+                             f"at most {limit:,}")
+    with z.open(info) as fh:
+        data = fh.read(limit + 1)
+    if len(data) > limit:
+        raise EstimatorError(f"{src}: member {name!r} holds more than {limit:,} bytes")
+    return data
+
+
+def _load_state(blob: bytes, name: str, src: str, device: str) -> dict:
+    """A state dict of tensors, read without pickle; any error of the reader is one line."""
+    import pickle
+    import warnings
+
+    try:
+        with warnings.catch_warnings():  # torch's warnings about the pickle protocol: the line below says it
+            warnings.simplefilter("ignore")
+            state = torch.load(io.BytesIO(blob), map_location=device, weights_only=True)
+    except pickle.UnpicklingError:  # Python objects other than tensors: refused, never executed
+        raise EstimatorError(f"{src}: member {name!r} is not a state dict of plain tensors (damaged, or holding "
+                             "Python objects, which are refused without being run)") from None
+    except Exception as exc:  # noqa: BLE001 (a format or zip error of any kind: untrusted input)
+        raise EstimatorError(f"{src}: member {name!r} is not a torch state dict ({_first_line(exc, 'damaged')})"
+                             ) from None
+    if not isinstance(state, dict) or not all(isinstance(k, str) and isinstance(v, torch.Tensor)
+                                              for k, v in state.items()):
+        raise EstimatorError(f"{src}: member {name!r} is not a table of named tensors (a torch state dict)")
+    return state
+
+
+def _spec_and_net(meta: dict, src: str):
+    """The simulation spec and network settings of meta.json, each field named when bad."""
+    from ...generator import load_reference
+
+    if not isinstance(meta["spec"], dict):
+        raise EstimatorError(f"{src}: meta.json field 'spec' is not a table")
+    name = meta["spec"].get("class_name")
+    try:
+        known = isinstance(name, str) and load_reference(name) is not None
+    except (KeyError, ValueError):
+        known = False
+    if not known:
+        raise EstimatorError(f"{src}: meta.json field 'spec.class_name' is {meta['spec'].get('class_name')!r}: not "
+                             "a class mdaug has a reference for (HELI, QUAD)")
+    try:
+        spec = spec_from_dict(meta["spec"])
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise EstimatorError(f"{src}: meta.json field 'spec' is not valid ({_first_line(exc)})") from None
+    try:
+        net_cfg = NetConfig.from_dict(meta["net"])
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise EstimatorError(f"{src}: meta.json field 'net' is not valid ({_first_line(exc)})") from None
+    return spec, net_cfg
+
+
+def _check_prior(meta: dict, spec: SimulationSpec, src: str) -> None:
+    """The prior must be the class reference's; a prior of another class means the
+    class name was changed (said so, not 'retrain')."""
+    if _bad_number(meta["prior"]):
+        raise EstimatorError(f"{src}: meta.json field 'prior' holds NaN or inf")
+    try:
+        prior = Priors.from_dict(meta["prior"]).to_dict()
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise EstimatorError(f"{src}: meta.json field 'prior' is not valid ({_first_line(exc)})") from None
+    if prior == spec.priors().to_dict():
+        return
+    for other in ("HELI", "QUAD"):
+        if other != spec.class_name:
+            try:
+                theirs = SimulationSpec(other, spec.acquisition, spec.n_measurements, spec.radar).priors().to_dict()
+            except (KeyError, ValueError):
+                continue
+            if prior == theirs:
+                raise EstimatorError(f"{src}: meta.json field 'spec.class_name' is {spec.class_name!r} but its field "
+                                     f"'prior' is class {other}'s: the class name does not match the networks (an "
+                                     "edited or damaged file)")
+    raise EstimatorError(f"{src}: meta.json field 'prior' differs from the class reference's prior; retrain with: "
+                         f"{train_command(spec)}")
+
+
+def _bad_number(value) -> bool:
+    if isinstance(value, float):
+        return not np.isfinite(value)
+    if isinstance(value, dict):
+        return any(_bad_number(v) for v in value.values())
+    if isinstance(value, (list, tuple)):
+        return any(_bad_number(v) for v in value)
+    return False
+
+
+def _check_fields(meta: dict, src: str) -> None:
+    """The other meta fields against the values this mdaug knows."""
+    target = meta.get("target", 1)
+    if isinstance(target, bool) or target not in KNOWN_TARGETS:
+        raise EstimatorError(f"{src}: meta.json field 'target' is {target!r}: not a target version of mdaug (known: "
+                             f"{', '.join(map(str, KNOWN_TARGETS))})")
+    for key, ok, want in (("n_simulations", lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0,
+                           "an integer >= 0"),
+                          ("seed", lambda v: v is None or isinstance(v, int) and not isinstance(v, bool) and v >= 0,
+                           "an integer >= 0"),
+                          ("label_free", lambda v: isinstance(v, list) and all(isinstance(n, str) for n in v),
+                           "a list of names"),
+                          ("training", lambda v: isinstance(v, dict), "a table"),
+                          ("sbc", lambda v: isinstance(v, dict), "a table")):
+        if not ok(meta[key]):
+            raise EstimatorError(f"{src}: meta.json field {key!r} is {str(meta[key])[:60]!r}: expected {want}")
