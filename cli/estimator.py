@@ -101,7 +101,8 @@ def run_train(args) -> int:
     cls = _class(args.class_name)
     device_of(args.device)  # refuses cuda without a GPU, before any work
     check_estimator_sizes(args)
-    check_paths(outputs=[Output("--out", args.out, "model"), Output("--work", _work(args), "folder")])
+    check_paths(outputs=[Output("--out", args.out, "model"), Output("--work", _work(args), "folder")],
+                overwrite=args.overwrite)
     spec = SimulationSpec(cls, Acquisition.measured(args.ramps), args.measurements)
     cfg = default_training()
     if args.epochs is not None:
@@ -132,7 +133,8 @@ def run_sbc(args) -> int:
     cls = _class(args.class_name)
     check_estimator_sizes(args)
     check_paths(inputs=[("--estimator", args.estimator)], outputs=[Output("--json", args.json, "json"),
-                                                                    Output("--figure", args.figure, "plot")])
+                                                                    Output("--figure", args.figure, "plot")],
+                overwrite=args.overwrite)
     est = find(cls, Acquisition.measured(args.ramps), path=args.estimator)
     from ..radar import RadarConfig
 
