@@ -147,6 +147,9 @@ def run_evaluate(args) -> int:
                  clusters=drones(test))
     result(f"{model.name} model {args.model} on {args.test}")
     result(format_metrics(m))
+    if m["ci"] and drones(test) is None:
+        result(f"(the intervals treat every acquisition as independent: {args.test} names no drones, field "
+               "'specimen'; acquisitions of one drone are alike, so these intervals are too narrow for new drones)")
     if args.json is not None:
         payload = json.dumps({**m, "model": str(args.model), "test": str(args.test), "kind": model.name},
                              indent=1).encode()

@@ -124,7 +124,9 @@ def run_sweep(args) -> int:
             executor.shutdown(cancel_futures=True)
     res.settings["make_train"] = asdict(make_train)
     res.settings["test_files"] = [str(p) for p in args.test]
-    md = res.to_markdown()
+    res.settings["intervals"] = intervals_used(tests, args.n_boot)
+    md = res.to_markdown() + "\n" + "\n".join(f"95% intervals on {name}: {how}"
+                                               for name, how in res.settings["intervals"].items()) + "\n"
     if args.select is not None:
         res.settings["select_file"] = str(args.select)
         md += "\n" + honest_choice(res, args.select)
@@ -139,6 +141,18 @@ def run_sweep(args) -> int:
 
 
 SELECT = "select"  # the name of the --select set among the sweep's sets
+
+
+def intervals_used(tests: dict, n_boot: int) -> dict:
+    """{set name: which bootstrap its intervals use}: drones (the file's 'specimen') are
+    the clusters when the file names them, else the acquisitions are resampled."""
+    from ..classify.metrics import bootstrap_method
+
+    if not n_boot:
+        return {name: "none (--n-boot 0)" for name in tests}
+    return {name: f"{bootstrap_method(v[2] if len(v) > 2 else None, v[1])} ({n_boot} resamples)"
+            + ("" if len(v) > 2 else "; the file names no drones (field 'specimen')")
+            for name, v in tests.items()}
 
 
 def honest_choice(res, path) -> str:

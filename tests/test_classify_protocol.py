@@ -142,7 +142,7 @@ def test_cli_sweep_on_generator_profiles(tmp_path, capsys):
         assert (out / name).is_file()
     lines = (out / "sweep.csv").read_text().splitlines()
     assert len(lines) == 1 + 2 * 2
-    assert main(args + ["--test", str(tmp_path / "short.npz")]) == 2
+    assert main(args + ["--test", str(tmp_path / "short.npz"), "--overwrite"]) == 2
     err = capsys.readouterr().err
     assert "short.npz" in err and "200-bin" in err
 
@@ -151,7 +151,7 @@ def test_cli_baseline_cross_validates_and_saves(files, capsys):
     d = files
     args = ["baseline", str(d / "test.npz"), "--folds", "2", "--n-per-class", "40", "--epochs", "1",
             "--batch-size", "32", "--out", str(d / "tsaug.zip"), "--test", str(d / "train.npz"),
-            "--json", str(d / "tsaug.json")]
+            "--json", str(d / "tsaug.json"), "--allow-degenerate"]  # one epoch: a toy model
     assert main(args) == 0
     report = json.loads((d / "tsaug.json").read_text())
     assert report["cross_validation"]["n"] == 200
