@@ -273,3 +273,37 @@ def test_calibrate_reads_an_estimator_file_as_untrusted_input(name, must, estima
     refused(["calibrate", str(estimators / "m.npz"), "--class", "HELI", "--out", str(out / "p.nc"),
              "--estimator", str(estimators / name)], estimators, out, must, seconds=15)
     assert not (estimators / "RAN").exists()
+
+
+# ---- 5. SIGTERM and Ctrl-C inside emcee: the one line only -------------------------------------------
+@pytest.mark.parametrize("signum", ["SIGTERM", "SIGINT"])
+def test_a_signal_inside_emcees_log_probability_prints_nothing_and_reads_as_itself(signum, capfd):
+    """The signal lands while emcee calls the log-probability (the emcee route, the
+    population's hyper-posterior: both run_ensemble): emcee's parameter dump and
+    traceback are never printed, the run stops at the step's end, and the interrupt
+    reads as a SIGTERM (143) or a Ctrl-C (130)."""
+    import os
+    import signal
+
+    from mdaug.inference.samplers.emcee_run import run_ensemble
+    from mdaug.inference.settings import CalibrationSettings
+    from mdaug.radar.workers import terminate_as_interrupt, was_terminated
+
+    sig = getattr(signal, signum)
+    calls = []
+
+    def log_post(theta):
+        calls.append(len(theta))
+        if len(calls) == 5:
+            os.kill(os.getpid(), sig)  # delivered now, inside emcee's call
+        return -0.5 * np.sum(theta ** 2, axis=1)
+
+    settings = CalibrationSettings(progress=False, time_budget=60).with_plugin("emcee", max_steps=2000)
+    p0 = np.random.default_rng(0).normal(size=(8, 2))
+    with pytest.raises(KeyboardInterrupt) as info, terminate_as_interrupt():
+        run_ensemble(log_post, p0, settings, seed=0)
+    assert was_terminated(info.value) == (signum == "SIGTERM")
+    assert 5 <= len(calls) <= 7  # stopped at the end of the step the signal landed in
+    out, err = capfd.readouterr()
+    assert "emcee" not in err + out and "Traceback" not in err + out and "params" not in err + out, err
+    assert signal.getsignal(signal.SIGTERM) is not None

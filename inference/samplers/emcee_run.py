@@ -118,6 +118,43 @@ def _check_backend(path: Path, fp: str, shape) -> int:
         raise ValueError(f"{path}: not a readable HDF5 file ({exc})") from exc
 
 
+@contextlib.contextmanager
+def _stop_on_sigterm():
+    """While active (main thread, where a handler such as
+    :func:`mdaug.radar.workers.terminate_as_interrupt`'s is installed), SIGTERM sets ``flag["stop"]`` instead of raising
+    inside the log-probability, where emcee would print its parameter dump and
+    traceback before re-raising; the loop checks the flag after each step and raises
+    the interrupt outside emcee's call (recognised as a SIGTERM by
+    :func:`mdaug.radar.workers.was_terminated`). The previous handler is restored."""
+    import signal
+    import threading
+
+    flag = {"stop": False}
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, signal.SIG_IGN, None):
+        yield flag  # a worker (SIGTERM kills it at once, printing nothing) or no handler to defer
+        return
+
+    def handler(signum, frame):
+        flag["stop"] = True
+
+    old = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield flag
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+def _interrupted(terminated: bool, message: str):
+    """The interrupt to raise outside emcee: a SIGTERM's carries a Terminated as its cause."""
+    from ...radar.workers import Terminated
+
+    exc = CalibrationInterrupted(message)
+    if terminated:
+        exc.__cause__ = Terminated()
+    return exc
+
+
 def _block_end(it: int, check: int, max_steps: int | None) -> int:
     end = (it // check + 1) * check
     return end if max_steps is None else min(end, max_steps)
@@ -182,7 +219,7 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
     bar = progress_bar(total=bar_total(max(target, check)), initial=min(it, bar_total(max(target, check))),
                        desc="calibration", unit="step", progress=settings.progress)
     try:
-        with stop_on_sigint() as flag, contextlib.redirect_stdout(io.StringIO()):
+        with stop_on_sigint() as flag, _stop_on_sigterm() as term, contextlib.redirect_stdout(io.StringIO()):
             while True:
                 if it > 0 and it % check == 0 or (max_steps is not None and it >= max_steps) or out_of_time:
                     chain = sampler.get_chain()
@@ -216,8 +253,8 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
                 for state in sampler.sample(state, iterations=n // k, thin_by=k, skip_initial_state_check=True):
                     it += k
                     bar.update(k)
-                    if flag["stop"]:
-                        raise CalibrationInterrupted(f"stopped at step {it}")
+                    if flag["stop"] or term["stop"]:
+                        raise _interrupted(term["stop"], f"stopped at step {it}")
                     if budget is not None and time.perf_counter() - t0 > budget:
                         out_of_time = True
                         break
