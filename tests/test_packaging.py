@@ -51,6 +51,9 @@ def test_wheel_installs_and_runs_outside_the_repository(tmp_path):
     assert "mdaug/generator/chain/__init__.py" in names
     assert "mdaug/generator/data/classes.json" in names
     assert not any(n.startswith(("tests/", "mdaug/tests/")) for n in names)
+    # the root folder is the package: the build's own files must not be installed inside it
+    assert not {"mdaug/setup.py", "mdaug/pyproject.toml", "mdaug/README.md"} & set(names)
+    assert not any(n.startswith("mdaug/docs/") for n in names)
 
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True, env=env)
@@ -78,3 +81,23 @@ def test_wheel_installs_and_runs_outside_the_repository(tmp_path):
     with np.load(work / "m.npz") as data:
         assert data["profiles"].shape[0] >= 2
         assert set(data["labels"].tolist()) == {"HELI"}
+
+
+@pytest.mark.slow
+def test_the_dependencies_pull_no_cuda_runtime(tmp_path):
+    """``pip install .`` resolves no ``nvidia-*`` package (xgboost-cpu, not xgboost, which
+    pulls nvidia-nccl-cu12; torch from the CPU wheel): a dry run of the wheel's
+    dependencies with the machine's indexes, nothing installed."""
+    import json
+
+    src = _tracked_copy(tmp_path / "src")
+    env = {k: v for k, v in _env().items() if k != "PIP_NO_INDEX"}
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
+                    "-w", str(tmp_path / "wheels"), str(src)], check=True, env=env, cwd=tmp_path)
+    (wheel,) = (tmp_path / "wheels").glob("mdaug-*.whl")
+    report = tmp_path / "report.json"
+    subprocess.run([sys.executable, "-m", "pip", "install", "--dry-run", "--ignore-installed", "-q", "--report",
+                    str(report), str(wheel)], check=True, env=env, cwd=tmp_path, capture_output=True)
+    names = {i["metadata"]["name"].lower() for i in json.loads(report.read_text())["install"]}
+    assert "xgboost-cpu" in names and "xgboost" not in names
+    assert not [n for n in names if n.startswith("nvidia")], sorted(names)
