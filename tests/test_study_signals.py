@@ -1,7 +1,11 @@
 """SIGTERM and Ctrl-C reach the study's workers (issue 31): a study with two worker
 processes ends within seconds with one line (exit 143 / 130), its workers are gone,
 nothing is written after the parent's line, and a rerun resumes. Each case starts a
-real ``mdaug run`` in its own session and signals it once its workers are calibrating."""
+real ``mdaug run`` in its own session and signals it once its workers are calibrating.
+
+Time limits hold under load (issue 39, item 9): the claim "within seconds" is checked
+against a limit scaled by the machine's load (:func:`_limit`); the waits that only
+guard against a hang (workers starting, the process exiting) are generous."""
 import os
 import signal
 import subprocess
@@ -25,6 +29,17 @@ def _study(d):
             "--workers", "2"]
 
 
+STARTUP_S = 240.0  # at most this long for the study's two workers to start (a hang guard: imports under load)
+EXIT_GUARD_S = 180.0  # at most this long for every process to be gone after the signal (a hang guard)
+EXIT_S = 10.0  # the claim: the command ends within this many seconds of the signal on an idle machine
+
+
+def _limit(seconds: float) -> float:
+    """``seconds`` on an idle machine, scaled by how busy it is now: the 1-minute load
+    average per core (at least 1; a 2-core machine running 4 jobs gets twice the time)."""
+    return seconds * max(1.0, os.getloadavg()[0] / (os.cpu_count() or 1))
+
+
 def _tree(folder):
     return {str(p): p.stat().st_mtime_ns for p in folder.rglob("*")}
 
@@ -37,14 +52,14 @@ def _signalled(argv, d, send):
                          env=env)
     try:
         t0, kids = time.time(), []
-        while time.time() - t0 < 60 and len(kids) < 2:
+        while time.time() - t0 < STARTUP_S and len(kids) < 2 and p.poll() is None:
             kids = psutil.Process(p.pid).children(recursive=True)
             time.sleep(0.1)
         assert len(kids) >= 2, "the study's workers did not start"
         time.sleep(1.0)  # the workers are calibrating
         t1 = time.time()
         send(p)
-        out, err = p.communicate(timeout=30)  # the workers hold the pipes too: this returns when all are gone
+        out, err = p.communicate(timeout=EXIT_GUARD_S)  # the workers hold the pipes too: returns when all are gone
         return p.returncode, out, err, time.time() - t1, kids
     finally:
         if p.poll() is None:
@@ -56,7 +71,7 @@ def _check(status, err, took, kids, folder, want_status, word):
     assert status == want_status, err
     assert len(lines) == 1 and lines[0].startswith(f"mdaug run: {word}; finished stages are kept"), err
     assert "Traceback" not in err
-    assert took < 10, took
+    assert took < _limit(EXIT_S), f"{took:.1f} s to exit (limit {_limit(EXIT_S):.0f} s at this load)"
     assert not [k.pid for k in kids if k.is_running() and k.status() != psutil.STATUS_ZOMBIE]
     before = _tree(folder)
     time.sleep(2.0)
