@@ -109,16 +109,43 @@ def run_train(args) -> int:
         from dataclasses import replace
 
         cfg = replace(cfg, max_epochs=args.epochs)
+    work, out_existed = _work(args), Path(args.out).exists()
+    created = _make_work(args, work)
     info(f"training the {cls} estimator at K = {args.ramps}: {args.simulations} simulated drones x "
-         f"{args.measurements} measurements, work folder {_work(args)}")
-    est = train_estimator(spec, args.simulations, _work(args), args.out, seed=args.seed, workers=args.workers,
-                          device=args.device, net_cfg=default_nets(cls), train_cfg=cfg,
-                          post_budget=args.posterior_budget, ratio_budget=args.ratio_budget,
-                          sbc_truths=args.sbc_truths, sbc_mcmc_truths=args.sbc_emcee_truths,
-                          command=_command(args, cls, cfg.max_epochs),
-                          progress=progress_enabled(), log=info)
+         f"{args.measurements} measurements, work folder {work}")
+    try:
+        est = train_estimator(spec, args.simulations, work, args.out, seed=args.seed, workers=args.workers,
+                              device=args.device, net_cfg=default_nets(cls), train_cfg=cfg,
+                              post_budget=args.posterior_budget, ratio_budget=args.ratio_budget,
+                              sbc_truths=args.sbc_truths, sbc_mcmc_truths=args.sbc_emcee_truths,
+                              command=_command(args, cls, cfg.max_epochs),
+                              progress=progress_enabled(), log=info)
+    except Exception:  # failed (an interrupt keeps the work folder, to resume): leave nothing this run made
+        import shutil
+
+        if not out_existed:
+            Path(args.out).unlink(missing_ok=True)
+        if created is not None:
+            shutil.rmtree(created, ignore_errors=True)
+        raise
     result(f"wrote {args.out} ({est.meta['job_seconds']:.0f} s)")
     return 0
+
+
+def _make_work(args, work: Path) -> Path | None:
+    """Create the work folder (and the folders above it) before any work, naming the
+    option when it cannot be; returns the topmost folder created (None: it existed)."""
+    top = work
+    while not top.parent.exists() and top.parent != top:
+        top = top.parent
+    existed = work.exists()
+    try:
+        work.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        where = f"--work {work}" if args.work is not None else f"the work folder {work} (OUT.work of --out {args.out})"
+        raise ValueError(f"{where}: cannot be created ({exc.strerror or exc}); give --work a writable folder") \
+            from None
+    return None if existed else top
 
 
 def run_sbc(args) -> int:

@@ -107,7 +107,8 @@ def invocation(args) -> str:
 
 def run_study(args) -> int:
     from ..reports.config import StudyConfig, load_config
-    from ..reports.identity import STUDY_FILES, check_study_folder, clear_study
+    from ..reports.identity import (STUDY_FILES, check_not_in_use, check_study_folder, clear_study, remove_skeleton,
+                                    snapshot, study_lock)
 
     from .guard import Output, check_paths
 
@@ -143,16 +144,22 @@ def run_study(args) -> int:
                   for name, path in (getattr(cfg.data, group) or {}).items()]
     check_paths(inputs=[("--config", args.config), *data_files],
                 outputs=[Output("--out", out, "folder", inside=STUDY_FILES, resumes=True)])
+    check_not_in_use(out)  # a folder another run is using: refused, never offered --overwrite
     if check_study_folder(out, cfg, overwrite=args.overwrite):  # another study: refused, or replaced when asked
         clear_study(out)
         info(f"{out}: the other study's files were removed (--overwrite)")
     from ..reports.study import Study, stage_names
 
+    before = snapshot(out)
     progress = StageProgress(stage_names(cfg))
     try:
-        study = Study(cfg, out, log=info, invocation=invocation(args))
-        study.cache.listener = progress
-        results = study.run()
+        with study_lock(out):
+            study = Study(cfg, out, log=info, invocation=invocation(args))
+            study.cache.listener = progress
+            results = study.run()
+    except (ValueError, OSError, MemoryError):  # a refusal before the first stage leaves no skeleton behind
+        remove_skeleton(out, before)
+        raise
     finally:
         progress.close()
     result(f"\nstudy finished in {results['total_seconds']:.0f} s: {out / 'report.html'}, {out / 'results.json'}")

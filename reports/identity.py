@@ -10,6 +10,7 @@ are removed first).
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import shutil
 from pathlib import Path
@@ -88,3 +89,121 @@ def claim(out, cfg) -> None:
     """Record the study of ``cfg`` in ``out/stages/study.json``."""
     text = json.dumps({"key": study_key(cfg), "config": cfg.source, "parts": _parts(cfg)}, indent=1)
     atomic_write(Path(out) / "stages" / IDENTITY, lambda fh: fh.write(text.encode()))
+
+
+# ---- a study folder in use, and what a refused run leaves ----------------------------------------
+LOCK = "run.lock"
+"""``stages/run.lock``: the pid, host and start time of the ``mdaug run`` using the folder."""
+SKELETON = ("data/", "posteriors/", "models/", "figures/", "stages/", f"stages/{IDENTITY}", f"stages/{LOCK}")
+"""What a study writes before its first stage: empty folders and its records."""
+
+
+def _lock_path(out) -> Path:
+    return Path(out) / "stages" / LOCK
+
+
+def _started(pid: int) -> float | None:
+    try:
+        import psutil
+
+        return float(psutil.Process(pid).create_time())
+    except Exception:  # psutil missing, or no such process
+        return None
+
+
+def study_in_use(out) -> dict | None:
+    """The lock record of another live run using ``out`` (None: no lock, our own, or
+    its owner is gone: a stale lock)."""
+    import os
+    import socket
+
+    try:
+        record = json.loads(_lock_path(out).read_text(encoding="utf-8"))
+        pid = int(record["pid"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if record.get("host") != socket.gethostname():
+        return record  # another machine's run: its pid cannot be checked from here
+    if pid == os.getpid():
+        return None
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return None
+    except PermissionError:
+        return record
+    started, stored = _started(pid), record.get("started")
+    if started is not None and isinstance(stored, (int, float)) and abs(started - stored) > 1.0:
+        return None  # the pid was reused by another process
+    return record
+
+
+def check_not_in_use(out) -> None:
+    """Refuse (ValueError naming the folder, the owner's pid and the lock) a study folder
+    another ``mdaug run`` is using: it is never replaced, not even with --overwrite."""
+    record = study_in_use(out)
+    if record is not None:
+        raise ValueError(f"{out}: --out is in use by another mdaug run (pid {record.get('pid')} on "
+                         f"{record.get('host')}); wait for it to end or stop it (a study in use is never replaced, "
+                         f"not even with --overwrite; if that run is gone, remove {_lock_path(out)})")
+
+
+@contextlib.contextmanager
+def study_lock(out):
+    """Hold ``out``'s lock (its folder and ``stages/`` created when missing) while the
+    block runs; refuses a folder another run holds; the lock is removed afterwards."""
+    import os
+    import socket
+
+    check_not_in_use(out)
+    path = _lock_path(out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.unlink(missing_ok=True)  # stale (its owner is gone): checked just above
+    record = {"pid": os.getpid(), "host": socket.gethostname(), "started": _started(os.getpid())}
+    try:
+        fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+    except FileExistsError:  # another run took it in between
+        check_not_in_use(out)
+        raise ValueError(f"{out}: --out is in use by another mdaug run (its lock {path} appeared just now)") from None
+    with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        json.dump(record, fh)
+    try:
+        yield path
+    finally:
+        try:
+            if json.loads(path.read_text(encoding="utf-8")).get("pid") == os.getpid():
+                path.unlink()
+        except (OSError, ValueError):
+            pass
+
+
+def snapshot(out) -> set | None:
+    """The paths under ``out`` now (None: ``out`` does not exist), for :func:`remove_skeleton`."""
+    out = Path(out)
+    return {p.relative_to(out).as_posix() for p in out.rglob("*")} if out.exists() else None
+
+
+def remove_skeleton(out, before: set | None) -> bool:
+    """After a run refused before its first stage: remove what it created in ``out``
+    (``before``: :func:`snapshot` taken before it started), when that is only the
+    study's skeleton (:data:`SKELETON`: empty folders, its records); stages of work
+    are never removed. True when something was removed."""
+    out = Path(out)
+    if not out.is_dir() or out.is_symlink():
+        return False
+    now = {p.relative_to(out).as_posix() for p in out.rglob("*")}
+    new = now - (before or set())
+    skeleton = {s.rstrip("/") for s in SKELETON}
+    if not new or any(p not in skeleton for p in new):
+        return False
+    for rel in sorted(new, key=lambda r: -r.count("/")):  # files, then folders, deepest first
+        path = out / rel
+        if path.is_dir():
+            with contextlib.suppress(OSError):
+                path.rmdir()  # only when empty
+        else:
+            path.unlink(missing_ok=True)
+    if before is None:
+        with contextlib.suppress(OSError):
+            out.rmdir()
+    return True

@@ -307,3 +307,87 @@ def test_a_signal_inside_emcees_log_probability_prints_nothing_and_reads_as_itse
     out, err = capfd.readouterr()
     assert "emcee" not in err + out and "Traceback" not in err + out and "params" not in err + out, err
     assert signal.getsignal(signal.SIGTERM) is not None
+
+
+# ---- 6. leftovers: a refused run leaves nothing; a folder in use is never replaced ------------------
+def test_a_study_refused_after_its_folder_was_made_leaves_no_skeleton(io_dirs, refused):
+    """Two files that disagree on K are found when the data stage reads them (after the
+    study's folder, its subfolders and stages/study.json were made): all removed."""
+    d, out = io_dirs
+    atomic_savez(d / "k8.npz", profiles=_profiles(), labels=LABELS, ramps_per_frame=np.array(8))
+    (d / "k.toml").write_text('[data]\ncalibration = { HELI = "m.npz", QUAD = "m.npz" }\ntest = { new = "k8.npz" }\n')
+    refused(["run", "--config", str(d / "k.toml"), "--out", str(out / "study")], d, out, ["k8.npz says 8 ramp(s)"],
+            seconds=20)
+    (out / "empty").mkdir()  # a folder that existed: kept, and left as it was
+    refused(["run", "--config", str(d / "k.toml"), "--out", str(out / "empty")], d, out, ["k8.npz says 8"],
+            seconds=20)
+
+
+def test_a_study_folder_in_use_is_refused_even_with_overwrite(tmp_path, refused):
+    """A folder whose stages/run.lock names a live process is never replaced: the
+    refusal names the owner's pid, and --overwrite is not offered."""
+    import json
+    import socket
+    import subprocess
+    import sys
+
+    from mdaug.reports.identity import _started, study_in_use
+
+    d, out = tmp_path / "in", tmp_path / "out"
+    d.mkdir()
+    out.mkdir()
+    study = out / "study"
+    (study / "stages").mkdir(parents=True)
+    (study / "stages" / "study.json").write_text(json.dumps({"key": "another study", "config": "x.toml"}))
+    owner = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        lock = {"pid": owner.pid, "host": socket.gethostname(), "started": _started(owner.pid)}
+        (study / "stages" / "run.lock").write_text(json.dumps(lock))
+        for extra in ([], ["--overwrite"]):
+            line = refused(["run", "--quick", "--out", str(study), *extra], d, out,
+                           [f"--out is in use by another mdaug run (pid {owner.pid}", "never replaced"], seconds=10)
+            assert "give --overwrite" not in line
+        assert study_in_use(study)["pid"] == owner.pid
+    finally:
+        owner.kill()
+        owner.wait()
+    assert study_in_use(study) is None  # its owner gone: a stale lock, taken over by the next run
+
+
+def test_the_lock_is_taken_and_given_back(tmp_path):
+    import os
+
+    from mdaug.reports.identity import check_not_in_use, study_lock
+
+    with study_lock(tmp_path / "s") as lock:
+        assert lock.is_file() and str(os.getpid()) in lock.read_text()
+        check_not_in_use(tmp_path / "s")  # our own lock
+    assert not lock.exists()
+
+
+def test_a_failed_train_estimator_leaves_neither_its_work_folder_nor_out(tmp_path, monkeypatch, refused):
+    import mdaug.inference.estimator_job as job
+
+    def failing(spec, n, work, out, **kw):
+        (work / "sims").mkdir(parents=True)
+        (work / "sims" / "shard-0.npz").write_bytes(b"x")
+        out.write_bytes(b"half an estimator")
+        raise ValueError("the SBC failed: something went wrong")
+
+    monkeypatch.setattr(job, "train_estimator", failing)
+    d, out = tmp_path / "in", tmp_path / "out"
+    d.mkdir()
+    out.mkdir()
+    refused(["train-estimator", "--class", "HELI", "--ramps", "4", "--simulations", "100", "--out",
+             str(out / "e.zip")], d, out, ["the SBC failed"], seconds=10)
+    refused(["train-estimator", "--class", "HELI", "--ramps", "4", "--simulations", "100", "--out",
+             str(out / "e.zip"), "--work", str(out / "a" / "b" / "w")], d, out, ["the SBC failed"], seconds=10)
+
+
+def test_an_uncreatable_work_folder_is_named_by_its_option(tmp_path, refused):
+    d, out = tmp_path / "in", tmp_path / "out"
+    d.mkdir()
+    out.mkdir()
+    (out / "file").write_text("a file, not a folder")
+    refused(["train-estimator", "--class", "HELI", "--ramps", "4", "--out", str(out / "e.zip"), "--work",
+             str(out / "file" / "w")], d, out, ["--work"], seconds=10)
