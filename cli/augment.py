@@ -108,10 +108,11 @@ def augmenters_from_args(args) -> tuple[list, dict | None, list[str]]:
 def check_augment_sizes(args, augmenters) -> None:
     """The ramps (the chain's included) and the counts against memory and time."""
     n = ("--n-per-class", args.n_per_class, 16000)
-    for aug in augmenters:
+    files = [path for _, path in (args.fit or []) + (args.posterior or []) + (args.population or [])]
+    for k, aug in enumerate(augmenters):  # in the order augmenters_from_args made them: fits, posteriors, populations
         acq, e = aug.renderer.acquisition, aug.n_engines
-        ramps = ramps_factor("--ramps" if args.ramps is not None else f"{aug.label}: the calibration's ramps per "
-                             "frame", acq.ramps)
+        ramps = ramps_factor("--ramps" if args.ramps is not None or k >= len(files) else
+                             f"{files[k]}: acquisition field 'ramps'", acq.ramps)
         if args.through_chain:
             frames = ("--mti-depth (+ 1 frames)", acq.mti_depth + 1, 11)
             check_size(ramps, frames, bytes_each=e * SAMPLES * 8 * 4, what="ramp frames of one profile")

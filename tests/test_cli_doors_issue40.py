@@ -391,3 +391,47 @@ def test_an_uncreatable_work_folder_is_named_by_its_option(tmp_path, refused):
     (out / "file").write_text("a file, not a folder")
     refused(["train-estimator", "--class", "HELI", "--ramps", "4", "--out", str(out / "e.zip"), "--work",
              str(out / "file" / "w")], d, out, ["--work"], seconds=10)
+
+
+# ---- 7. messages name the user's option or file field, not an internal object ------------------------
+def _save_population(path, ramps):
+    """A population file of the right layout (values need not mean anything) whose acquisition states K."""
+    import json
+
+    from mdaug.generator import load_reference
+    from mdaug.generator.acquisition import Acquisition
+    from mdaug.inference.population.model import SPREADS, Hyperprior, PopulationModel
+    from mdaug.inference.space.priors import Priors
+
+    ref = load_reference("HELI")
+    model, x0 = PopulationModel(1), ref.to_array()
+    rng = np.random.default_rng(0)
+    meta = {"format": "mdaug-population-1", "class_name": "HELI", "n_engines": 1, "gamma0": float(x0[0]),
+            "priors": Priors.from_reference(ref).to_dict(), "specimens": ["0", "1"],
+            "hyperprior": Hyperprior().scales, "coords": model.names,
+            "acquisition": Acquisition.measured(ramps).to_dict(), "drones_converged": [True, True],
+            "identified": [[True] * model.p] * 2,
+            "diagnostics": {"tau": [1.0], "steps": 10, "converged": True, "acceptance": 0.3}}
+    atomic_savez(path, meta=np.array(json.dumps(meta)), spreads=np.abs(rng.normal(0.05, 0.01, (40, len(SPREADS)))),
+                 mu=np.tile(model.transform(x0[None]), (40, 1)), measured=np.ones(model.p, bool),
+                 pool=np.tile(x0, (6, 1)), pool_drone=np.repeat([0, 1], 3),
+                 drone_means=np.tile(model.transform(x0[None]), (2, 1)), reference=x0)
+
+
+def test_a_k_read_from_a_calibration_file_is_named_by_file_and_field(io_dirs, refused):
+    d, out = io_dirs
+    _save_population(d / "pop.npz", 1001)
+    line = refused(["augment", "--population", f"HELI={d / 'pop.npz'}", "--n-per-class", "5", "--out",
+                    str(out / "a.npz")], d, out, ["pop.npz: acquisition field 'ramps' = 1001", "max_ramps_per_frame"])
+    assert "Acquisition." not in line and "SceneConfig" not in line and "RadarConfig" not in line
+
+
+@pytest.mark.parametrize("argv", [["simulate", "--class", "HELI", "--acquisitions", "1", "--ramps", "5000", "--out",
+                                   "{o}/s.npz"],
+                                  ["run", "--ramps", "5000", "--out", "{o}/study"],
+                                  ["augment", "--classes", "HELI", "--n-per-class", "5", "--ramps", "5000", "--out",
+                                   "{o}/a.npz"]])
+def test_no_internal_object_is_named_for_an_option(argv, io_dirs, refused):
+    d, out = io_dirs
+    line = refused([a.format(o=out) for a in argv], d, out, ["--ramps = 5000"], seconds=10)
+    assert not any(w in line for w in ("SceneConfig", "Acquisition.", "RadarConfig"))
