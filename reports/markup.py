@@ -19,6 +19,7 @@ h1{font-size:1.6em;margin-bottom:.3em}h2{border-bottom:1px solid #ddd;padding-bo
 table{border-collapse:collapse;margin:.6em 0;font-size:.95em}td,th{border:1px solid #d4d4d4;padding:3px 7px;
 vertical-align:top}th{background:#f3f3f3;text-align:left}td.n{text-align:right;white-space:nowrap}
 tr.chosen td{background:#eef5fc}td.verdict{min-width:13em}.ci{color:#666;font-size:.85em;white-space:nowrap}
+.ci.wrap{white-space:normal}
 .warn{color:#b00020;font-weight:600}.flag{color:#b00020}.ok{color:#1b7a3a;font-weight:600}
 img{max-width:100%;height:auto;display:block;margin:.4em 0}
 .headline{font-size:1.12em;background:#f6f8fa;border-left:4px solid #1f78b4;padding:.6em .9em;margin:.6em 0}

@@ -45,6 +45,17 @@ def decimals(interval, default: int = 2, lo: int = 1, hi: int = 4) -> int:
     return int(min(max(sig - 1 - e, lo), hi))
 
 
+def column_decimals(intervals, default: int = 2, lo: int = 1, hi: int = 4) -> int:
+    """One precision per table column: the decimals of its sharpest interval
+    (:func:`decimals`), so every cell of the column shows as many (a column never holds
+    '0.9 [0.0, 1.0]' beside '0.334 [0.311, 0.364]'); intervals without width (a class
+    always or never recognised) do not count; ``default`` when none has a width."""
+    ds = [decimals(ci, default, lo, hi) for ci in intervals
+          if ci and ci[0] is not None and ci[1] is not None and np.isfinite(ci[0]) and np.isfinite(ci[1])
+          and ci[1] > ci[0]]
+    return max(ds) if ds else default
+
+
 def fmt(v, digits: int = 2) -> str:
     if v is None or (isinstance(v, float) and not np.isfinite(v)):
         return "–"

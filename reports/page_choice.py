@@ -6,7 +6,7 @@ from __future__ import annotations
 from ..classify.protocol import row_ci
 from . import figures
 from .markup import Figures, Html, details, table, td
-from .numbers import decimals, join
+from .numbers import column_decimals, join
 
 
 def _best_text(r: dict, j: dict, w: Html, sel: str) -> str:
@@ -64,13 +64,14 @@ def choice_section(r: dict, j: dict, figs: Figures, w: Html) -> str:
         out.append(figs.embed("sweeps", fig, "Balanced accuracy of the fast classifiers against sigma_P and the "
                               "specimen width, on the selection set (the choice) and the test set (information)"))
         rows = []
+        d = column_decimals([row_ci(row) for row in r["candidates"]["rows"]])  # one precision per column
         for i, row in enumerate(r["candidates"]["rows"]):
             k = f"candidates.rows.{i}"
             rows.append([td(w.esc(row["strategy"]), False), td(w.num(f"{k}.value", row["value"], 2)),
                          td(w.esc(row["model"]), False), td(w.esc(row["test_set"]), False),
                          td(w.val_ci(f"{k}.balanced_accuracy", row["balanced_accuracy"],
-                                     (f"{k}.balanced_lo", f"{k}.balanced_hi"), row_ci(row), br=True)),
-                         td(w.num(f"{k}.accuracy", row["accuracy"], decimals(row_ci(row)))),
+                                     (f"{k}.balanced_lo", f"{k}.balanced_hi"), row_ci(row), d=d, br=True)),
+                         td(w.num(f"{k}.accuracy", row["accuracy"], d)),
                          td(w.num(f"{k}.min_recall", row["min_recall"], 2)),
                          td(w.num(f"{k}.train_seconds", row["train_seconds"], 2))])
         out.append(details("Every candidate in numbers",
