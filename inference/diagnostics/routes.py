@@ -7,7 +7,7 @@ turns ranks into the rank chi-square p-values and the outer-10% share, 0.10 when
 honest), the coverage of central intervals at several levels (the coverage curve),
 the median 90% width over the truth beside the prior's, and TARP (Lemos et al. 2023,
 sbi's implementation: expected coverage of random reference balls; ATC near 0 and a
-large KS p-value when honest).
+large KS p-value when honest), and the log score of the truth (:mod:`.yardsticks`).
 """
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ import time
 import numpy as np
 
 from .sbc import summarise
+from .yardsticks import log_score
 
 LEVELS = (0.5, 0.6, 0.7, 0.8, 0.9, 0.95)
 
@@ -44,8 +45,10 @@ def run(draw, truths_q: np.ndarray, data, names: list[str], *, n_rank: int = 199
     if prior_q is not None:
         lo, hi = np.quantile(prior_q, [0.05, 0.95], axis=0)
         out["prior_width_over_truth"] = dict(zip(names, map(float, np.median((hi - lo) / np.abs(truths_q), axis=0))))
-    out.update(tarp(s if to_unbounded is None else np.stack([to_unbounded(d) for d in s]),
-                    truths_q if to_unbounded is None else to_unbounded(truths_q)))
+    su = s if to_unbounded is None else np.stack([to_unbounded(d) for d in s])
+    tu = truths_q if to_unbounded is None else to_unbounded(truths_q)
+    out.update(tarp(su, tu))
+    out.update(log_score(su, tu))
     out["ranks"] = out["ranks"].tolist()
     return out
 
@@ -90,4 +93,6 @@ def headline(summary: dict) -> str:
     lo, hi = summary["coverage90_range"]
     return (f"outer-10% share {summary['outer_share']:.3f} (honest 0.10), 90% coverage {lo:.2f}-{hi:.2f}, "
             f"rank chi-square pooled p {summary['pooled_p']:.3g}, TARP ATC {summary['tarp_atc']:.3f} "
-            f"(KS p {summary['tarp_ks_p']:.2f}), {summary['n_replicates']} truths")
+            f"(KS p {summary['tarp_ks_p']:.2f}), "
+            + (f"log score {summary['log_score']:.2f}, " if "log_score" in summary else "")
+            + f"{summary['n_replicates']} truths")

@@ -1,0 +1,76 @@
+"""Yardsticks beside SBC: is a posterior honest, and how sharp is it?
+
+SBC alone cannot rank routes: the prior itself passes it. So every route is judged on
+the same fresh drones by
+
+* the **gate** (:func:`honest`): not overconfident, i.e. an outer-10% share of at most
+  ``OUTER_MAX`` and every quantity's 90% coverage at least ``COVERAGE_MIN`` (a
+  posterior wider than the data allow passes; it loses on the next yardstick);
+* the **log score** of the truth (:func:`log_score`): the mean of -log q(u_true | x)
+  over drones, in the unbounded label-free coordinates u, q a Gaussian fitted to the
+  route's draws (the same density family for every route, so the scores compare;
+  lower is sharper *and* right);
+* the median 90% width over the truth per quantity (:mod:`.routes`), beside the
+  Cramer-Rao bound where the route has a likelihood.
+
+:func:`route_table` runs several routes on the same drones and names the default: the
+best log score among the routes that pass the gate.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+OUTER_MAX = 0.13
+"""Largest outer-10% share an honest posterior may show (0.10 expected)."""
+COVERAGE_MIN = 0.85
+"""Smallest 90% coverage of any quantity an honest posterior may show (0.90 expected)."""
+
+
+def gaussian_log_density(samples: np.ndarray, points: np.ndarray, ridge: float = 1e-9) -> np.ndarray:
+    """log N(point; mean, cov) of a Gaussian fitted to each replicate's draws:
+    samples (S, R, d), points (R, d) -> (R,)."""
+    s = np.asarray(samples, float)
+    p = np.asarray(points, float)
+    mean = s.mean(axis=0)
+    dev = s - mean
+    cov = np.einsum("sri,srj->rij", dev, dev) / (len(s) - 1)
+    d = s.shape[-1]
+    scale = np.trace(cov, axis1=1, axis2=2)[:, None, None] / d
+    cov = cov + ridge * scale * np.eye(d)
+    chol = np.linalg.cholesky(cov)
+    r = np.linalg.solve(chol, (p - mean)[..., None])[..., 0]
+    return -0.5 * (r * r).sum(-1) - np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(-1) - 0.5 * d * np.log(2 * np.pi)
+
+
+def log_score(samples_u: np.ndarray, truths_u: np.ndarray) -> dict:
+    """Mean and per-drone -log q(u_true | x) (module doc): samples_u (S, R, d), truths_u (R, d)."""
+    nl = -gaussian_log_density(samples_u, truths_u)
+    return {"log_score": float(np.mean(nl)), "log_score_median": float(np.median(nl)),
+            "log_score_by_drone": nl.tolist()}
+
+
+def honest(summary: dict) -> bool:
+    """The gate (module doc) on a :func:`.routes.run` summary."""
+    return bool(summary["outer_share"] <= OUTER_MAX and summary["coverage90_range"][0] >= COVERAGE_MIN)
+
+
+def verdict(summary: dict) -> str:
+    """One word for the gate: 'honest' or 'overconfident' (the terms the docs use)."""
+    return "honest" if honest(summary) else "overconfident"
+
+
+def route_table(routes: dict, truths_q: np.ndarray, data, names: list[str], *, to_unbounded, n_rank: int = 199,
+                seed: int = 0, progress=None) -> dict:
+    """Every route (name -> draw(profiles, n, seed) -> (q draws (n, d), converged)) on
+    the same drones; returns {"rows": {name: summary}, "default": name or None}: the
+    best (lowest) log score among the routes that pass the gate (None when none does)."""
+    from .routes import run
+
+    rows = {}
+    for name, draw in routes.items():
+        rows[name] = run(draw, truths_q, data, names, n_rank=n_rank, seed=seed, to_unbounded=to_unbounded,
+                         progress=progress, desc=f"SBC {name}")
+        rows[name]["verdict"] = verdict(rows[name])
+    passing = [n for n, r in rows.items() if honest(r)]
+    default = min(passing, key=lambda n: rows[n]["log_score"]) if passing else None
+    return {"rows": rows, "default": default}

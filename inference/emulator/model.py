@@ -1,0 +1,131 @@
+"""The emulated likelihood's trained model: everything a calibration needs, as data.
+
+:class:`SummaryModel` holds the label-free space of a class, the summary's whitening,
+the emulator network and the covariance of the emulator's own held-out error, for one
+acquisition and radar. For a drone with label-free coordinates u and n measurements:
+
+    z_bar | u ~ N(mu(u), c (W(u) (1 / n + alpha) + beta I))
+
+z_bar the whitened mean folded log-profile of the n measurements, mu the emulator,
+W(u) the drone's own within-drone covariance of one measurement (a network; the
+pooled one is the identity after whitening), W(u) alpha + beta I the emulator's own
+error (alpha, beta >= 0 fitted by maximum likelihood to its residuals on held-out
+simulated drones, net of the noise in its targets), c >= 1 an inflation chosen on
+other held-out drones so that the chi-square of the truth's residual has its
+expected median (stated in the file: ``inflation``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ...generator.acquisition import Acquisition
+from ...radar import RadarConfig
+from ..amortized.target import LabelFree
+from .net import CovarianceNet, Emulator
+from .sketch import sketch
+from .summary import Whitening
+
+
+@dataclass
+class SummaryModel:
+    """The emulated likelihood of one class under one acquisition (module doc)."""
+
+    class_name: str
+    acquisition: Acquisition
+    radar: RadarConfig
+    label_free: LabelFree
+    whitening: Whitening
+    net: Emulator
+    cov_net: CovarianceNet
+    error_scale: float = 0.0
+    error_floor: float = 0.0
+    inflation: float = 1.0
+
+    @property
+    def dim(self) -> int:
+        return self.label_free.dim
+
+    @property
+    def n_components(self) -> int:
+        return self.whitening.n_components
+
+    def features(self, u: np.ndarray) -> np.ndarray:
+        """Physics sketch (n, F) of label-free coordinates u (n, d)."""
+        q = self.label_free.from_unbounded(u)
+        return sketch(q, self.label_free.E, self.whitening.n_offsets, self.radar)
+
+    def _nets(self, u: np.ndarray, covariance: bool):
+        u = np.atleast_2d(np.asarray(u, float))
+        tu = torch.as_tensor(u, dtype=torch.float32)
+        ts = torch.as_tensor(self.features(u), dtype=torch.float32)
+        with torch.no_grad():
+            mean = self.net(tu, ts).double().numpy()
+            chol = self.cov_net(tu, ts).double().numpy() if covariance else None
+        return mean, chol
+
+    def mean(self, u: np.ndarray) -> np.ndarray:
+        """mu(u): (n, D) expected whitened summary of drones u (n, d)."""
+        return self._nets(u, False)[0]
+
+    def within(self, u: np.ndarray) -> np.ndarray:
+        """W(u): (n, D, D) within-drone covariance of one measurement's whitened summary."""
+        chol = self._nets(u, True)[1]
+        return chol @ np.swapaxes(chol, -1, -2)
+
+    def moments(self, u: np.ndarray, n_measurements: int) -> tuple[np.ndarray, np.ndarray]:
+        """(mu (N, D), covariance (N, D, D)) of the whitened mean of n measurements of drones u (N, d)."""
+        mean, chol = self._nets(u, True)
+        return mean, self.covariance_from(chol @ np.swapaxes(chol, -1, -2), n_measurements)
+
+    def covariance_from(self, within: np.ndarray, n_measurements: int) -> np.ndarray:
+        """c (W (1 / n + alpha) + beta I) (module doc) from W (..., D, D)."""
+        eye = np.eye(within.shape[-1])
+        return self.inflation * (within * (1.0 / int(n_measurements) + self.error_scale) + self.error_floor * eye)
+
+    def summarise(self, profiles: np.ndarray) -> np.ndarray:
+        """(D,) whitened mean folded log-profile of measurements (M, L)."""
+        from .summary import folded_log_profile
+
+        return self.whitening(folded_log_profile(profiles, self.whitening.n_offsets).mean(axis=0))
+
+    def fisher(self, u: np.ndarray, n_measurements: int, step: float = 1e-3) -> np.ndarray:
+        """Fisher information (d, d) of u at u (d,) for n measurements (:func:`fisher_information`,
+        the mean's and the covariance's derivatives by central differences in u)."""
+        u = np.asarray(u, float).reshape(-1)
+        e = np.eye(len(u)) * step
+        pts = np.concatenate([u[None], u + e, u - e])
+        mean, cov = self.moments(pts, n_measurements)
+        d = len(u)
+        jac = ((mean[1: d + 1] - mean[d + 1:]) / (2 * step)).T
+        dcov = (cov[1: d + 1] - cov[d + 1:]) / (2 * step)
+        return fisher_information(jac, cov[0], dcov)
+
+
+def fisher_information(jac: np.ndarray, cov: np.ndarray, dcov: np.ndarray | None = None) -> np.ndarray:
+    """Fisher information of a Gaussian N(mu(theta), S(theta)): jac (D, d) = d mu / d theta,
+    cov (D, D), dcov (d, D, D) = d S / d theta_i or None (constant S):
+    I_ij = d_i mu' S^-1 d_j mu + 1/2 tr(S^-1 d_i S S^-1 d_j S)."""
+    jac = np.asarray(jac, float)
+    sinv_j = np.linalg.solve(cov, jac)
+    info = jac.T @ sinv_j
+    if dcov is not None:
+        a = np.stack([np.linalg.solve(cov, dc) for dc in dcov])  # S^-1 d_i S
+        info = info + 0.5 * np.einsum("iab,jba->ij", a, a)
+    return 0.5 * (info + info.T)
+
+
+def cramer_rao(info: np.ndarray) -> np.ndarray:
+    """Cramer-Rao bound: the covariance bound (d, d) = I^-1. Where a direction carries
+    no information (eigenvalue below 1e-10 of the largest), the bound of every
+    coordinate that direction touches is infinite (its diagonal entry is inf); the
+    rest is the pseudo-inverse."""
+    w, v = np.linalg.eigh(0.5 * (info + info.T))
+    ok = w > w.max(initial=0.0) * 1e-10
+    inv_w = np.where(ok, 1.0 / np.where(ok, w, 1.0), 0.0)
+    bound = (v * inv_w) @ v.T
+    blind = (np.abs(v[:, ~ok]) > 1e-9).any(axis=1)
+    bound[np.diag_indices_from(bound)] = np.where(blind, np.inf, np.diag(bound))
+    return bound

@@ -1,0 +1,177 @@
+"""The emulator: label-free quantities u -> the expected whitened summary of a drone.
+
+Input: u (the unbounded label-free coordinates, :mod:`mdaug.inference.amortized.target`)
+and the physics sketch of :mod:`.sketch` (the folded log-magnitude where the lines put
+power), each z-scored with the training set's mean and sd; output: the D whitened
+components of :class:`.summary.Whitening`, as the sketch's projection plus a learned
+correction (an MLP of the inputs). Trained on squared error against the mean summary
+of simulated drones' measurements; :func:`fit` keeps the epoch of the lowest
+validation loss (early stopping).
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+
+class Emulator(nn.Module):
+    """u (n, d), sketch (n, F) -> mean whitened summary (n, D) (module doc)."""
+
+    def __init__(self, dim: int, n_offsets: int, n_components: int, hidden: int = 256, depth: int = 3):
+        super().__init__()
+        self.dim, self.n_offsets, self.n_components = int(dim), int(n_offsets), int(n_components)
+        self.hidden, self.depth = int(hidden), int(depth)
+        self.register_buffer("in_mean", torch.zeros(dim + n_offsets))
+        self.register_buffer("in_sd", torch.ones(dim + n_offsets))
+        self.register_buffer("sketch_basis", torch.zeros(n_components, n_offsets))
+        self.register_buffer("sketch_centre", torch.zeros(n_offsets))
+        layers, width = [], dim + n_offsets
+        for _ in range(depth):
+            layers += [nn.Linear(width, hidden), nn.SiLU()]
+            width = hidden
+        layers.append(nn.Linear(width, n_components))
+        self.mlp = nn.Sequential(*layers)
+
+    def config(self) -> dict:
+        return {"dim": self.dim, "n_offsets": self.n_offsets, "n_components": self.n_components,
+                "hidden": self.hidden, "depth": self.depth}
+
+    def forward(self, u: torch.Tensor, sk: torch.Tensor) -> torch.Tensor:
+        inp = (torch.cat([u, sk], dim=-1) - self.in_mean) / self.in_sd
+        return (sk - self.sketch_centre) @ self.sketch_basis.T + self.mlp(inp)
+
+
+def fit(net: Emulator, u: np.ndarray, sk: np.ndarray, target: np.ndarray, *, seed: int, epochs: int = 300,
+        batch: int = 256, lr: float = 2e-3, patience: int = 30, val_share: float = 0.1, progress=None) -> dict:
+    """Train ``net`` in place on (u, sketch) -> target (n, D); returns the history
+    (train / validation loss per epoch, the best epoch). The validation split is the
+    last ``val_share`` of a seeded permutation."""
+    g = torch.Generator().manual_seed(int(seed))
+    n = len(u)
+    perm = torch.randperm(n, generator=g)
+    n_val = max(1, int(round(val_share * n)))
+    tr, va = perm[n_val:], perm[:n_val]
+    U, S, T = (torch.as_tensor(a, dtype=torch.float32) for a in (u, sk, target))
+    x = torch.cat([U, S], 1)
+    net.in_mean.copy_(x[tr].mean(0))
+    net.in_sd.copy_(x[tr].std(0).clamp_min(1e-6))
+    opt = torch.optim.Adam(net.parameters(), lr=lr)
+    sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=0.5, patience=patience // 3)
+    best, best_state, hist, since = np.inf, None, [], 0
+    for epoch in range(epochs):
+        net.train()
+        order = tr[torch.randperm(len(tr), generator=g)]
+        tot = 0.0
+        for i in range(0, len(order), batch):
+            b = order[i: i + batch]
+            loss = ((net(U[b], S[b]) - T[b]) ** 2).mean()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            tot += float(loss.detach()) * len(b)
+        net.eval()
+        with torch.no_grad():
+            v = float(((net(U[va], S[va]) - T[va]) ** 2).mean())
+        sched.step(v)
+        hist.append((tot / len(tr), v))
+        if progress:
+            progress(epoch, tot / len(tr), v)
+        if v < best - 1e-5:
+            best, since = v, 0
+            best_state = {k: t.clone() for k, t in net.state_dict().items()}
+        else:
+            since += 1
+            if since >= patience:
+                break
+    net.load_state_dict(best_state)
+    net.eval()
+    return {"loss": hist, "best_epoch": int(np.argmin([h[1] for h in hist])), "best_val": best,
+            "validation": va.numpy()}
+
+
+class CovarianceNet(nn.Module):
+    """u (n, d), sketch (n, F) -> Cholesky factor (n, D, D) of the within-drone covariance
+    of one measurement's whitened summary (the pooled one is the identity; this one
+    follows the drone: a faint, slow drone's profiles vary less from acquisition to
+    acquisition than a bright, fast one's). L = diag(exp(s)) + strictly lower part,
+    both from an MLP whose last layer starts at zero (L = I before training)."""
+
+    def __init__(self, dim: int, n_offsets: int, n_components: int, hidden: int = 256, depth: int = 2):
+        super().__init__()
+        self.dim, self.n_offsets, self.n_components = int(dim), int(n_offsets), int(n_components)
+        self.hidden, self.depth = int(hidden), int(depth)
+        d = self.n_components
+        self.register_buffer("in_mean", torch.zeros(dim + n_offsets))
+        self.register_buffer("in_sd", torch.ones(dim + n_offsets))
+        self.register_buffer("lower", torch.tril_indices(d, d, -1))
+        layers, width = [], dim + n_offsets
+        for _ in range(depth):
+            layers += [nn.Linear(width, hidden), nn.SiLU()]
+            width = hidden
+        last = nn.Linear(width, d + d * (d - 1) // 2)
+        nn.init.zeros_(last.weight)
+        nn.init.zeros_(last.bias)
+        self.mlp = nn.Sequential(*layers, last)
+
+    def config(self) -> dict:
+        return {"dim": self.dim, "n_offsets": self.n_offsets, "n_components": self.n_components,
+                "hidden": self.hidden, "depth": self.depth}
+
+    def forward(self, u: torch.Tensor, sk: torch.Tensor) -> torch.Tensor:
+        d = self.n_components
+        out = self.mlp((torch.cat([u, sk], dim=-1) - self.in_mean) / self.in_sd)
+        chol = torch.diag_embed(torch.exp(out[..., :d].clamp(-10.0, 10.0)))
+        chol[..., self.lower[0], self.lower[1]] = out[..., d:]
+        return chol
+
+
+def fit_covariance(net: CovarianceNet, u: np.ndarray, sk: np.ndarray, z: np.ndarray, *, seed: int,
+                   epochs: int = 200, batch: int = 256, lr: float = 1e-3, patience: int = 20,
+                   val_share: float = 0.1) -> dict:
+    """Train ``net`` in place on the measurements' whitened summaries z (n, M, D) of
+    drones (u, sketch): the deviations from each drone's own mean are Gaussian with
+    covariance W (M - 1) / M, W = L L' (maximum likelihood; early stopping on a seeded
+    validation split). Returns the history."""
+    g = torch.Generator().manual_seed(int(seed))
+    n, m, _ = z.shape
+    perm = torch.randperm(n, generator=g)
+    n_val = max(1, int(round(val_share * n)))
+    tr, va = perm[n_val:], perm[:n_val]
+    U, S = torch.as_tensor(u, dtype=torch.float32), torch.as_tensor(sk, dtype=torch.float32)
+    Z = torch.as_tensor(z, dtype=torch.float32)
+    dev = (Z - Z.mean(1, keepdim=True)) * float(np.sqrt(m / (m - 1)))
+    x = torch.cat([U, S], 1)
+    net.in_mean.copy_(x[tr].mean(0))
+    net.in_sd.copy_(x[tr].std(0).clamp_min(1e-6))
+
+    def nll(idx):
+        chol = net(U[idx], S[idx])  # (b, D, D)
+        w = torch.linalg.solve_triangular(chol, dev[idx].transpose(1, 2), upper=False)  # (b, D, M)
+        logdet = torch.log(torch.diagonal(chol, dim1=1, dim2=2)).sum(1)
+        return (m * logdet + 0.5 * (w * w).sum((1, 2))).mean() / m
+
+    opt = torch.optim.Adam(net.parameters(), lr=lr)
+    best, best_state, hist, since = np.inf, None, [], 0
+    for epoch in range(epochs):
+        net.train()
+        order = tr[torch.randperm(len(tr), generator=g)]
+        for i in range(0, len(order), batch):
+            loss = nll(order[i: i + batch])
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+        net.eval()
+        with torch.no_grad():
+            v = float(nll(va))
+        hist.append(v)
+        if v < best - 1e-4:
+            best, since = v, 0
+            best_state = {k: t.clone() for k, t in net.state_dict().items()}
+        else:
+            since += 1
+            if since >= patience:
+                break
+    net.load_state_dict(best_state)
+    net.eval()
+    return {"val_nll": hist, "best_epoch": int(np.argmin(hist)), "best_val": best}

@@ -1,0 +1,98 @@
+"""Yardsticks beside SBC on toys with known answers: the summary's covariance, the
+Fisher information and Cramer-Rao bound, the log score and the route table's gate."""
+import numpy as np
+import pytest
+
+from mdaug.inference.diagnostics.yardsticks import gaussian_log_density, honest, route_table
+from mdaug.inference.emulator.model import cramer_rao, fisher_information
+from mdaug.inference.emulator.summary import Whitening, folded_log_profile
+
+
+def test_fisher_information_of_a_linear_gaussian_model_is_a_s_inverse_a():
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(6, 2))
+    s = np.diag([0.5, 1.0, 2.0, 1.0, 0.3, 4.0])
+    info = fisher_information(a, s)
+    np.testing.assert_allclose(info, a.T @ np.linalg.inv(s) @ a, rtol=1e-12)
+    # the bound is the covariance of the least-squares estimate (generalised LS)
+    np.testing.assert_allclose(cramer_rao(info), np.linalg.inv(a.T @ np.linalg.inv(s) @ a), rtol=1e-10)
+
+
+def test_fisher_information_of_a_variance_parameter():
+    # x_i ~ N(0, sigma^2) for D i.i.d. components: I(sigma^2) = D / (2 sigma^4)
+    d, var = 7, 2.5
+    info = fisher_information(np.zeros((d, 1)), var * np.eye(d), dcov=np.eye(d)[None])
+    assert info[0, 0] == pytest.approx(d / (2 * var ** 2))
+
+
+def test_cramer_rao_of_an_unidentified_direction_is_infinite():
+    info = np.array([[4.0, 0.0], [0.0, 0.0]])
+    bound = cramer_rao(info)
+    assert bound[0, 0] == pytest.approx(0.25)
+    assert np.isinf(bound[1, 1])
+
+
+def test_whitening_makes_the_within_drone_covariance_the_identity_and_orders_by_between():
+    rng = np.random.default_rng(1)
+    n, m, f = 400, 8, 5
+    within = np.diag([1.0, 4.0, 0.25, 1.0, 2.0])
+    means = rng.normal(size=(n, f)) * np.array([3.0, 0.1, 0.1, 1.0, 0.1])
+    s = means[:, None, :] + rng.multivariate_normal(np.zeros(f), within, size=(n, m))
+    w = Whitening.fit(s, 3)
+    dev = (s - s.mean(1, keepdims=True)).reshape(-1, f) @ w.basis.T
+    cov = dev.T @ dev / (n * (m - 1))
+    np.testing.assert_allclose(cov, np.eye(3), atol=2e-5)  # the fit adds a ridge of 1e-6 x the mean variance
+    assert list(w.between) == sorted(w.between, reverse=True)
+    assert w.between[0] == pytest.approx(9.0, rel=0.25)  # var 9 along component 0, within 1
+
+
+def test_folded_log_profile_averages_both_sides_and_refuses_too_many_offsets():
+    p = np.full(21, 0.01)
+    p[10] = 1.0
+    p[12], p[8] = 0.1, 0.001
+    s = folded_log_profile(p, 3)
+    np.testing.assert_allclose(s, [-2.0, 0.5 * (-1 - 3), -2.0])
+    with pytest.raises(ValueError, match="n_offsets must be in 1..10"):
+        folded_log_profile(p, 11)
+
+
+def test_gaussian_log_density_matches_scipy():
+    from scipy.stats import multivariate_normal
+
+    rng = np.random.default_rng(2)
+    s = rng.normal(size=(5000, 1, 3)) @ np.array([[1.0, 0.3, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 0.5]])
+    pt = np.array([[0.3, -0.2, 0.1]])
+    ref = multivariate_normal(s[:, 0].mean(0), np.cov(s[:, 0], rowvar=False)).logpdf(pt[0])
+    assert gaussian_log_density(s, pt)[0] == pytest.approx(ref, rel=1e-7)  # the ridge: 1e-9 x the mean variance
+
+
+def _conjugate(n_truths=300, n_obs=5, seed=3):
+    """theta ~ N(0, 1), x_i ~ N(theta, 1): posterior N(sum x / (n + 1), 1 / (n + 1))."""
+    rng = np.random.default_rng(seed)
+    truths = rng.normal(size=(n_truths, 1))
+    data = [t + rng.normal(size=n_obs) for t in truths[:, 0]]
+
+    def route(scale):
+        def draw(x, n, s):
+            r = np.random.default_rng(s)
+            mean, sd = x.sum() / (len(x) + 1), np.sqrt(1 / (len(x) + 1))
+            return mean + scale * sd * r.standard_normal((n, 1)), True
+        return draw
+
+    return truths, data, route
+
+
+def test_route_table_passes_the_exact_posterior_fails_a_narrow_one_and_ranks_a_wide_one_below():
+    truths, data, route = _conjugate()
+    table = route_table({"exact": route(1.0), "narrow": route(0.5), "wide": route(2.0)}, truths, data,
+                        ["theta"], to_unbounded=lambda q: q, n_rank=199)
+    rows = table["rows"]
+    assert honest(rows["exact"]) and rows["exact"]["verdict"] == "honest"
+    assert 0.06 <= rows["exact"]["outer_share"] <= 0.14
+    assert not honest(rows["narrow"]) and rows["narrow"]["verdict"] == "overconfident"
+    assert rows["narrow"]["outer_share"] > 0.3
+    assert honest(rows["wide"])  # conservative passes the gate...
+    assert rows["wide"]["log_score"] > rows["exact"]["log_score"] + 0.3  # ...and loses on the log score
+    assert table["default"] == "exact"
+    # the exact posterior's log score is the expected entropy-plus-nothing: 0.5 log(2 pi e / 6)
+    assert rows["exact"]["log_score"] == pytest.approx(0.5 * np.log(2 * np.pi * np.e / 6), abs=0.12)
