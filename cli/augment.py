@@ -77,6 +77,9 @@ def augmenters_from_args(args) -> tuple[list, dict | None, list[str]]:
             augs.append(augmenter(s, cls, calibration=post, acquisition=acq))
         for cls, path in pops:
             pop = STRATEGIES["population"].load(path, cls)
+            from ..inference.sanity import check_unique_drones
+
+            check_unique_drones(pop.meta["specimens"], str(path), "field 'meta' key 'specimens'")
             if not pop.converged or not all(pop.meta["drones_converged"]):
                 warnings.append(f"population of {cls} ({path}) was built from unconverged calibrations "
                                 "(see mdaug calibrate's report); its spreads may be too wide")

@@ -171,6 +171,11 @@ def run_calibrate(args) -> int:
         raise DataFileError(f"{args.measured}: field 'profiles' holds {len(profiles)} measurements of class {cls}; "
                             f"one calibration takes at most {MAX_MEASUREMENTS} of one drone (the supported case is "
                             "a handful; --specimen ID picks one drone, --population calibrates each)")
+    from ..inference.sanity import check_calibration_profiles
+
+    rows = np.flatnonzero(np.asarray(data.labels) == cls)
+    check_calibration_profiles(profiles, str(args.measured), cls,  # constant, repeated or off-centre: refused
+                               rows if args.specimen is None else rows[data.specimens(cls) == args.specimen])
     check_calibrate_sizes(args, settings, len(profiles))
     from .calibrate_amortized import (amortized_settings, calibration_method, report_amortized,
                                       warn_several_drones)

@@ -299,11 +299,15 @@ class StudyConfig:
 
         length = RadarConfig().slice_length
         given = None if self.ramps is None else Acquisition.measured(self.ramps)
+        first = None  # (path, acquisition) of the first file that states K: every other one must agree
         for group in ("calibration", "select", "test"):
             for name, path in getattr(self.data, group).items():
                 ps = load_profiles(path)  # errors name the file and field
-                resolve_acquisition(acquisition_from_file(ps.extra, path), given, str(path),
-                                    f"{self.source}: ramps (or --ramps)")
+                stated = acquisition_from_file(ps.extra, path)
+                resolve_acquisition(stated, given, str(path), f"{self.source}: ramps (or --ramps)")
+                if stated is not None and first is not None:
+                    resolve_acquisition(stated, first[1], str(path), str(first[0]))
+                first = first or ((path, stated) if stated is not None else None)
                 if ps.profiles.shape[1] != length:
                     raise ValueError(f"{self.source}: data.{group}.{name}: {path}: field 'profiles' has "
                                      f"{ps.profiles.shape[1]}-bin profiles; the study takes {length}-bin "
@@ -311,6 +315,11 @@ class StudyConfig:
                 if group in ("calibration", "select"):
                     ps.select(name)
                     ps.check_no_zero_rows(name)
+                if group == "calibration":  # constant, repeated or off-centre profiles: refused by name
+                    from ..inference.sanity import check_calibration_profiles
+
+                    check_calibration_profiles(ps.select(name), f"{self.source}: data.calibration.{name}: {path}",
+                                               name, (ps.labels == name).nonzero()[0])
                 else:
                     ps.check_no_zero_rows()
                     unknown = sorted(set(ps.classes) - set(self.classes))

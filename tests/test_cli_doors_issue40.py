@@ -310,17 +310,30 @@ def test_a_signal_inside_emcees_log_probability_prints_nothing_and_reads_as_itse
 
 
 # ---- 6. leftovers: a refused run leaves nothing; a folder in use is never replaced ------------------
-def test_a_study_refused_after_its_folder_was_made_leaves_no_skeleton(io_dirs, refused):
-    """Two files that disagree on K are found when the data stage reads them (after the
-    study's folder, its subfolders and stages/study.json were made): all removed."""
+def test_files_that_disagree_on_k_are_refused_before_the_folder_exists(io_dirs, refused):
     d, out = io_dirs
     atomic_savez(d / "k8.npz", profiles=_profiles(), labels=LABELS, ramps_per_frame=np.array(8))
     (d / "k.toml").write_text('[data]\ncalibration = { HELI = "m.npz", QUAD = "m.npz" }\ntest = { new = "k8.npz" }\n')
-    refused(["run", "--config", str(d / "k.toml"), "--out", str(out / "study")], d, out, ["k8.npz says 8 ramp(s)"],
-            seconds=20)
+    refused(["run", "--config", str(d / "k.toml"), "--out", str(out / "study")], d, out,
+            ["k8.npz says 8 ramp(s) per frame but", "m.npz says 4"], seconds=20)
+
+
+def test_a_study_refused_after_its_folder_was_made_leaves_no_skeleton(io_dirs, refused, monkeypatch):
+    """A refusal in the data stage (after the study's folder, its subfolders and
+    stages/study.json were made) removes them all; a folder that existed is kept."""
+    from mdaug.reports.study import Study
+
+    def refuse(self, executor=None):
+        raise ValueError("x.npz: field 'profiles' refused in the data stage")
+
+    monkeypatch.setattr(Study, "data", refuse)
+    d, out = io_dirs
+    (d / "s.toml").write_text('[data]\ncalibration = { HELI = "m.npz", QUAD = "m.npz" }\ntest = { new = "m.npz" }\n')
+    refused(["run", "--config", str(d / "s.toml"), "--out", str(out / "study")], d, out,
+            ["refused in the data stage"], seconds=20)
     (out / "empty").mkdir()  # a folder that existed: kept, and left as it was
-    refused(["run", "--config", str(d / "k.toml"), "--out", str(out / "empty")], d, out, ["k8.npz says 8"],
-            seconds=20)
+    refused(["run", "--config", str(d / "s.toml"), "--out", str(out / "empty")], d, out,
+            ["refused in the data stage"], seconds=20)
 
 
 def test_a_study_folder_in_use_is_refused_even_with_overwrite(tmp_path, refused):
@@ -435,3 +448,71 @@ def test_no_internal_object_is_named_for_an_option(argv, io_dirs, refused):
     d, out = io_dirs
     line = refused([a.format(o=out) for a in argv], d, out, ["--ramps = 5000"], seconds=10)
     assert not any(w in line for w in ("SceneConfig", "Acquisition.", "RadarConfig"))
+
+
+# ---- 8. data that cannot be what they claim, at the calibration boundary -----------------------------
+@pytest.fixture
+def odd_data(io_dirs):
+    d, out = io_dirs
+    x = _profiles()
+    same = x.copy()
+    same[[2, 4, 6]] = same[0]  # four identical HELI profiles (rows 0, 2, 4, 6)
+    atomic_savez(d / "same.npz", profiles=same, labels=LABELS, ramps_per_frame=np.array(4))
+    flat = x.copy()
+    flat[[1, 3]] = 0.25
+    atomic_savez(d / "flat.npz", profiles=flat, labels=LABELS, ramps_per_frame=np.array(4))
+    off = x.copy()
+    off[5, 200], off[5, 260] = 0.1, 2.0  # peak 60 bins off the centre
+    atomic_savez(d / "off.npz", profiles=off, labels=LABELS, ramps_per_frame=np.array(4))
+    for name in ("same", "flat", "off"):
+        (d / f"{name}.toml").write_text(f'[data]\ncalibration = {{ HELI = "{name}.npz", QUAD = "m.npz" }}\n'
+                                        'test = { new = "m.npz" }\n')
+    _save_population(d / "pop_ids.npz", 4)
+    import json
+
+    arrays = dict(np.load(d / "pop_ids.npz"))
+    meta = json.loads(str(arrays.pop("meta")))
+    meta["specimens"] = ["a", "a"]
+    atomic_savez(d / "pop_ids.npz", meta=np.array(json.dumps(meta)), **arrays)
+    return d, out
+
+
+SANITY_CASES = [
+    ("identical", ["calibrate", "{d}/same.npz", "--class", "HELI", "--out", "{o}/p.nc"],
+     ["same.npz: field 'profiles' holds 4 identical profiles of class HELI (row(s) 0, 2, 4, 6)", "3 of them are copies"]),
+    ("constant", ["calibrate", "{d}/flat.npz", "--class", "HELI", "--out", "{o}/p.nc"],
+     ["flat.npz: field 'profiles' holds 2 constant profile(s) of class HELI (row(s) 1, 3)", "no signal"]),
+    ("off-centre", ["calibrate", "{d}/off.npz", "--class", "HELI", "--out", "{o}/p.nc"],
+     ["off.npz: field 'profiles' holds 1 of 10 profile(s) of class HELI whose peak lies more than 4 bins",
+      "row(s) 5 at bin(s) 260"]),
+    ("identical-one-drone", ["calibrate", "{d}/same.npz", "--class", "HELI", "--specimen", "0", "--out", "{o}/p.nc"],
+     ["same.npz: field 'profiles' holds 4 identical profiles"]),
+    ("identical-population", ["calibrate", "{d}/same.npz", "--class", "HELI", "--population", "--out", "{o}/p.npz"],
+     ["same.npz: field 'profiles' holds 4 identical"]),
+    ("study-identical", ["run", "--config", "{d}/same.toml", "--out", "{o}/study"],
+     ["same.toml: data.calibration.HELI: ", "same.npz: field 'profiles' holds 4 identical profiles"]),
+    ("study-constant", ["run", "--config", "{d}/flat.toml", "--out", "{o}/study"],
+     ["flat.toml: data.calibration.HELI: ", "2 constant profile(s)"]),
+    ("study-off-centre", ["run", "--config", "{d}/off.toml", "--out", "{o}/study"],
+     ["off.toml: data.calibration.HELI: ", "peak lies more than 4 bins"]),
+    ("population-duplicate-ids", ["augment", "--population", "HELI={d}/pop_ids.npz", "--n-per-class", "5", "--out",
+                                  "{o}/a.npz"],
+     ["pop_ids.npz: field 'meta' key 'specimens' names 2 drones with 1 repeated id(s) ('a')"]),
+]
+
+
+@pytest.mark.parametrize("case", SANITY_CASES, ids=[c[0] for c in SANITY_CASES])
+def test_data_that_cannot_be_what_they_claim_are_refused(case, odd_data, refused):
+    _, argv, must = case
+    d, out = odd_data
+    refused([a.format(d=d, o=out) for a in argv], d, out, must, seconds=15)
+
+
+def test_the_sanity_check_passes_real_data():
+    from mdaug.generator.acquisition import Acquisition
+    from mdaug.inference.amortized.simulate import SimulationSpec, simulate
+    from mdaug.inference.sanity import check_calibration_profiles
+
+    _, y = simulate(SimulationSpec("QUAD", Acquisition.measured(4), 5), 3, 0)
+    for k in range(3):
+        check_calibration_profiles(y[k], "sim", "QUAD")
