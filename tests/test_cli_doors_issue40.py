@@ -516,3 +516,22 @@ def test_the_sanity_check_passes_real_data():
     _, y = simulate(SimulationSpec("QUAD", Acquisition.measured(4), 5), 3, 0)
     for k in range(3):
         check_calibration_profiles(y[k], "sim", "QUAD")
+
+
+def test_a_chain_too_short_for_tau_never_reports_an_impossible_ratio():
+    """--max-steps 4 reported '18014398509481984.0 x max tau': tau is at least one
+    stored step, and a chain too short to estimate it says so."""
+    import re
+
+    from mdaug.inference.samplers.emcee_run import _tau, run_ensemble
+    from mdaug.inference.settings import CalibrationSettings
+
+    rng = np.random.default_rng(0)
+    assert np.all(_tau(rng.normal(size=(3, 8, 3)), (), 2) == 2.0)  # emcee's estimator gives 0 here
+    for steps in (2, 4, 6):
+        settings = CalibrationSettings(progress=False).with_plugin("emcee", max_steps=steps, check_every=2)
+        run = run_ensemble(lambda t: -0.5 * np.sum(t ** 2, axis=1), rng.normal(size=(8, 2)), settings, seed=steps)
+        assert not run.converged and np.all(run.tau >= 1), run.reason
+        assert "e+" not in run.reason, run.reason
+        ratio = re.search(r"ended at ([0-9.]+) x max tau", run.reason)
+        assert ratio is None and "too few to estimate" in run.reason or float(ratio.group(1)) <= steps, run.reason

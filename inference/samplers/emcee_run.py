@@ -155,6 +155,12 @@ def _interrupted(terminated: bool, message: str):
     return exc
 
 
+def _tau(chain, phase_cols, k: int) -> np.ndarray:
+    """tau in steps, at least one stored step (``k``): a chain too short to estimate it
+    gives ~1e-16 from emcee's estimator, and chain / tau ratios of 1e16."""
+    return np.maximum(estimate_tau(chain, phase_cols) * k, float(k))
+
+
 def _block_end(it: int, check: int, max_steps: int | None) -> int:
     end = (it // check + 1) * check
     return end if max_steps is None else min(end, max_steps)
@@ -223,7 +229,7 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
             while True:
                 if it > 0 and it % check == 0 or (max_steps is not None and it >= max_steps) or out_of_time:
                     chain = sampler.get_chain()
-                    tau = estimate_tau(chain, phase_cols) * k
+                    tau = _tau(chain, phase_cols, k)
                     long_enough = it >= own.min_tau_multiple * tau.max()
                     target = own.min_tau_multiple * tau.max()
                     bar.total = max(bar_total(target), it)
@@ -232,7 +238,7 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
                     if long_enough and it > check:
                         # tau one block earlier, recomputed (not remembered) so that a resumed
                         # run takes exactly the decisions of an uninterrupted one
-                        tau_prev = estimate_tau(chain[: (it - check) // k], phase_cols) * k
+                        tau_prev = _tau(chain[: (it - check) // k], phase_cols, k)
                         if np.all(np.abs(tau - tau_prev) <= own.tau_rtol * tau):
                             converged = True
                             reason = f"chain {it} steps >= {own.min_tau_multiple:g} x max tau {tau.max():.0f}"
@@ -242,7 +248,10 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
                     what = (f"time budget of {budget:g} s" if out_of_time else f"budget of {max_steps} steps")
                     reason = (f"NOT CONVERGED: {what} ended at {ratio:.1f} x max tau ({tau.max():.0f} steps; "
                               f"need {own.min_tau_multiple:g})")
-                    if ratio >= own.min_tau_multiple:
+                    if tau.max() <= k:  # no estimate: never an impossible ratio (4 steps were '1.8e16 x max tau')
+                        reason = (f"NOT CONVERGED: {what} ended after {it} steps, too few to estimate the "
+                                  f"autocorrelation time tau (need {own.min_tau_multiple:g} x tau)")
+                    elif ratio >= own.min_tau_multiple:
                         reason += f"; tau still changing by more than {own.tau_rtol:.0%} per block"
                     elif ratio < 20:
                         reason += "; tau is a lower bound (its estimate is capped by the chain length)"
