@@ -145,6 +145,10 @@ def run_study(args) -> int:
     check_paths(inputs=[("--config", args.config), *data_files],
                 outputs=[Output("--out", out, "folder", inside=STUDY_FILES, resumes=True)])
     check_not_in_use(out)  # a folder another run is using: refused, never offered --overwrite
+    from ..inference.sanity import shared_files
+
+    for text in shared_files(cfg.data.calibration, cfg.data.test, str(cfg.source)):
+        result(f"note: {text}")  # on stdout, always printed: stderr keeps its one line for errors and interrupts
     if check_study_folder(out, cfg, overwrite=args.overwrite):  # another study: refused, or replaced when asked
         clear_study(out)
         info(f"{out}: the other study's files were removed (--overwrite)")

@@ -82,3 +82,17 @@ def check_unique_drones(ids, source: str, field: str) -> None:
         n = sum(ids.count(i) for i in twice)
         raise DataFileError(f"{source}: {field} names {n} drones with {len(twice)} repeated id(s) "
                             f"({', '.join(map(repr, twice[:SHOWN]))}): each drone appears once")
+
+
+def shared_files(calibration: dict, test: dict, source: str) -> list[str]:
+    """Warnings (one line each) for test sets that are a calibration file (the same
+    file after resolving links): their scores are of data the calibration saw."""
+    import os
+
+    warnings = []
+    for name, path in test.items():
+        same = [cls for cls, cal in calibration.items() if os.path.realpath(cal) == os.path.realpath(path)]
+        if same:
+            warnings.append(f"{source}: data.test.{name} ({path}) is also the calibration file of "
+                            f"{', '.join(same)}: its scores are of measurements the calibration saw, not of new data")
+    return warnings

@@ -535,3 +535,24 @@ def test_a_chain_too_short_for_tau_never_reports_an_impossible_ratio():
         assert "e+" not in run.reason, run.reason
         ratio = re.search(r"ended at ([0-9.]+) x max tau", run.reason)
         assert ratio is None and "too few to estimate" in run.reason or float(ratio.group(1)) <= steps, run.reason
+
+
+def test_a_test_set_that_is_a_calibration_file_is_warned_of(io_dirs, capsys, monkeypatch):
+    from mdaug.cli import main
+    from mdaug.reports.study import Study
+
+    def refuse(self, executor=None):
+        raise ValueError("stopped here by the test")
+
+    monkeypatch.setattr(Study, "data", refuse)
+    d, out = io_dirs
+    atomic_savez(d / "t.npz", profiles=_profiles(seed=1), labels=LABELS, ramps_per_frame=np.array(4))
+    (d / "s.toml").write_text('[data]\ncalibration = { HELI = "m.npz", QUAD = "m.npz" }\ntest = { new = "m.npz", '
+                              'other = "t.npz" }\n')
+    assert main(["run", "--config", str(d / "s.toml"), "--out", str(out / "study")]) == 2
+    text = capsys.readouterr()
+    notes = [line for line in text.out.splitlines() if line.startswith("note: ")]
+    assert len(notes) == 1 and "data.test.new" in notes[0], text.out
+    assert "is also the calibration file of HELI, QUAD" in notes[0] and "other" not in notes[0]
+    err = text.err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("mdaug run: error: stopped here"), err
