@@ -556,3 +556,10 @@ def test_a_test_set_that_is_a_calibration_file_is_warned_of(io_dirs, capsys, mon
     assert "is also the calibration file of HELI, QUAD" in notes[0] and "other" not in notes[0]
     err = text.err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("mdaug run: error: stopped here"), err
+
+
+def test_sbc_checks_the_estimators_class_against_class(estimators, tmp_path, refused):
+    out = tmp_path / "out"
+    out.mkdir()
+    refused(["sbc", "--class", "QUAD", "--ramps", "4", "--truths", "2", "--estimator", str(estimators / "k32.zip")],
+            estimators, out, ["k32.zip: meta.json field 'spec.class_name' is 'HELI'", "class 'QUAD'"], seconds=15)
