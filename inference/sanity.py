@@ -55,8 +55,8 @@ def check_calibration_profiles(profiles, source: str, class_name: str, rows=None
     if repeated.size:
         copies = int(repeated.size - np.count_nonzero(counts > 1))
         raise DataFileError(f"{head} holds {repeated.size} identical profiles of class {class_name} (row(s) "
-                            f"{_rows(rows[repeated])}): {copies} of them are copies, not independent measurements "
-                            "(the posterior would be too sharp); keep one of each")
+                            f"{_rows(rows[repeated])}): {copies} {'is a copy' if copies == 1 else 'are copies'}, not "
+                            "independent measurements (the posterior would be too sharp); keep one of each")
     centre = x.shape[1] // 2
     peaks = np.argmax(x, axis=1)
     off = np.flatnonzero(np.abs(peaks - centre) > CENTRE_TOLERANCE)
