@@ -176,7 +176,7 @@ def test_cli_calibrate_and_posterior_augment(tmp_path, capsys):
     assert ds.profiles.shape == (50, 400) and ds.settings["strategy"] == "posterior"
     assert ds.params["HELI"].shape == (50, N_PARAMS)
     # a posterior given under another class name is refused
-    assert main(["augment", "--posterior", f"QUAD={out}", "--n-per-class", "5", "--out", str(aug)]) == 2
+    assert main(["augment", "--posterior", f"QUAD={out}", "--n-per-class", "5", "--out", str(tmp_path / "q.npz")]) == 2
     assert "expected 'QUAD'" in capsys.readouterr().err
     # without --posterior the sigma_P path still runs
     assert main(["augment", "--classes", "HELI", "--n-per-class", "5", "--allow-one-class",
