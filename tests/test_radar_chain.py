@@ -208,7 +208,9 @@ def test_process_cli_writes_measured_profile_format(tmp_path, rng, capsys):
     assert ps.extra["frame"].tolist() == [10, 10, 11]
     assert ps.settings()["simulated"] is False
     # without --label the file's own label is used; a file without one is an error naming it
-    assert cli.main(["process", str(a), "--out", str(out)]) == 0
+    assert cli.main(["process", str(a), "--out", str(out)]) == 2  # no silent overwrite
+    assert f"{out}: --out: the file exists" in capsys.readouterr().err
+    assert cli.main(["process", str(a), "--out", str(out), "--overwrite"]) == 0
     assert load_profiles(out).labels.tolist() == ["QUAD"]
     assert cli.main(["process", str(b), "--out", str(tmp_path / "x.npz")]) == 2
     assert str(b) in capsys.readouterr().err
