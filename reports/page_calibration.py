@@ -12,7 +12,7 @@ import numpy as np
 
 from . import figures
 from .markup import Figures, Html, details, img, table, td
-from .numbers import decimals, fmt, fmt_sig
+from .numbers import column_decimals, fmt, fmt_sig
 from .verdicts import FAR, nuisances
 
 
@@ -42,12 +42,14 @@ def _lines_table(cal: dict) -> str:
     fq = np.asarray(lines["frequency_q"], float) / (2 * np.pi)
     aq = np.asarray(lines["amplitude_q"], float) * 1e3
     rows = []
+    cells = [(k, j) for k in range(fq.shape[1]) for j in range(fq.shape[2])]
+    # one precision per column: the sharpest line's (frequencies to tens or hundreds of Hz, whole Hz at most)
+    fd = min(column_decimals([[fq[0, k, j], fq[2, k, j]] for k, j in cells], 0, -3, 2), 0)
+    ad = column_decimals([[aq[0, k, j], aq[2, k, j]] for k, j in cells], 2, 1, 4)
+    f = lambda v: f"{round(v, fd):,.0f}" if fd <= 0 else f"{v:,.{fd}f}"  # noqa: E731
     for k in range(fq.shape[1]):
         for j in range(fq.shape[2]):
             f_ci, a_ci = [fq[0, k, j], fq[2, k, j]], [aq[0, k, j], aq[2, k, j]]
-            fd = min(decimals(f_ci, 0, -3, 2), 0) if f_ci[1] > f_ci[0] else 0
-            ad = decimals(a_ci, 2, 1, 4)
-            f = lambda v: f"{round(v, fd):,.0f}" if fd <= 0 else f"{v:,.{fd}f}"  # noqa: E731
             rows.append([td(str(k)), td(str(j + 1)),
                          td(f"{f(fq[1, k, j])} <span class='ci'>[{f(f_ci[0])}, {f(f_ci[1])}]</span>"),
                          td(f"{fmt(aq[1, k, j], ad)} <span class='ci'>[{fmt(a_ci[0], ad)}, {fmt(a_ci[1], ad)}]"

@@ -201,3 +201,16 @@ def test_column_decimals_is_the_sharpest_intervals():
     assert column_decimals([wide, sharp, None]) == 3
     assert column_decimals([[0.5, 0.5], [1.0, 1.0]]) == 2  # no width: the default
     assert column_decimals([]) == 2 and column_decimals([wide, [0.0, 0.0]]) == 1
+
+
+def test_the_calibration_lines_table_has_one_precision_per_column(page):
+    _, text = page
+    tables = [t for t in re.findall(r"<table>.*?</table>", text, flags=re.S) if "<th>engine</th>" in t]
+    assert tables
+    for t in tables:
+        per_column = {}
+        for row in re.findall(r"<tr>(.*?)</tr>", t, flags=re.S)[1:]:
+            for j, cell in enumerate(re.findall(r"<td[^>]*>(.*?)</td>", row, flags=re.S)[2:]):
+                numbers = re.findall(r"-?\d[\d,]*(?:\.(\d+))?", re.sub(r"<[^>]+>", " ", cell))
+                per_column.setdefault(j, set()).update(len(d) for d in numbers)
+        assert per_column and all(len(ds) == 1 for ds in per_column.values()), per_column
