@@ -204,7 +204,7 @@ def run_calibrate(args) -> int:
             warnings.simplefilter("always")
             res = calibrate_amortized(profiles, cls.upper(), acquisition=acquisition, estimator=args.estimator,
                                       settings=amortized_settings(args, settings), random_state=args.seed,
-                                      route=args.route or "amortized", source=str(args.measured))
+                                      route=args.route, check=args.check_route, source=str(args.measured))
         return report_amortized(args, res, drones, caught)
     if len(set(drones.tolist())) > 1:
         warn("calibrate", f"{args.measured} holds {len(set(drones.tolist()))} drones of {cls} (field 'specimen'); "
@@ -263,10 +263,14 @@ def add_calibrate(sub, parents, help):
     d, q = CalibrationSettings(), CalibrationSettings.quick()
     d_emcee, q_emcee = d.of("emcee"), q.of("emcee")
     p = add_verb(sub, "calibrate", parents, help=help, interrupted=_interrupted,
-                 description="Fit the class's parameter vector to measured profiles (nlopt, several starts) and "
-                             "sample its posterior (emcee until 50 autocorrelation times, or tempered SMC with "
-                             "--sampler smc). Exit status 3 when the sampler did not converge (the posterior is "
-                             "still written, flagged); an interrupted run resumes from its chain checkpoint.")
+                 description="Calibrate a class's vibration model from a few measurements of one drone. "
+                             "Measured acquisitions (random phases): the class's trained estimator, by its "
+                             "default route (the file's route table: the best log score among the routes that "
+                             "pass SBC): nlopt + emcee to 50 autocorrelation times on the summary likelihood, "
+                             "started from the amortized posterior's draws, where the estimator has one; else the "
+                             "amortized posterior's exact draws. The published single chirp: the closed-form "
+                             "likelihood (nlopt, then emcee or --sampler smc/laplace). Exit status 3 when the "
+                             "sampler did not converge (the posterior is still written, flagged).")
     p.add_argument("measured", type=Path, help="measured profiles (NPZ, CSV or .mat with profiles and labels)")
     p.add_argument("--class", dest="class_name", required=True, metavar="CLASS",
                    help="class label to calibrate (e.g. HELI); its reference gives the priors")
@@ -297,8 +301,12 @@ def add_calibrate(sub, parents, help):
     g.add_argument("--estimator", type=Path, default=None,
                    help="estimator ZIP of mdaug train-estimator (default: the shipped one for the class and K)")
     g.add_argument("--route", choices=("amortized", "emcee"), default=None,
-                   help="which of the two learned posteriors the file's posterior group holds (the other is "
-                        "kept beside it) (default: amortized)")
+                   help="amortized: the estimator's posterior (exact draws, milliseconds); emcee: nlopt + emcee "
+                        "on the estimator's likelihood (the summary likelihood where it has one) (default: the "
+                        "estimator's default route)")
+    g.add_argument("--check-route", action="store_true",
+                   help="also run the other route and keep its draws beside the posterior, as a check "
+                        "(default: only the route used runs)")
     g = p.add_argument_group("budget and sampler")
     g.add_argument("--quick", action="store_true",
                    help="short run of seconds, for a first look (usually not converged)")

@@ -118,6 +118,8 @@ def run_train(args) -> int:
                               device=args.device, net_cfg=default_nets(cls), train_cfg=cfg,
                               post_budget=args.posterior_budget, ratio_budget=args.ratio_budget,
                               sbc_truths=args.sbc_truths, sbc_mcmc_truths=args.sbc_emcee_truths,
+                              summary=not args.no_summary, near_simulations=args.near_simulations,
+                              summary_cfg=_summary_config(args),
                               command=_command(args, cls, cfg.max_epochs),
                               progress=progress_enabled(), log=info)
     except Exception:  # failed (an interrupt keeps the work folder, to resume): leave nothing this run made
@@ -130,6 +132,14 @@ def run_train(args) -> int:
         raise
     result(f"wrote {args.out} ({est.meta['job_seconds']:.0f} s)")
     return 0
+
+
+def _summary_config(args):
+    from ..inference.emulator.train import EmulatorConfig
+
+    if args.summary_epochs is None:
+        return EmulatorConfig()
+    return EmulatorConfig(epochs=args.summary_epochs, cov_epochs=max(1, args.summary_epochs // 2))
 
 
 def _make_work(args, work: Path) -> Path | None:
@@ -221,7 +231,16 @@ def add_train(sub, parents, help):
     p.add_argument("--sbc-truths", type=nonneg_int, default=300, metavar="N",
                    help="SBC drones of the amortized route (default: %(default)s; 0: none)")
     p.add_argument("--sbc-emcee-truths", type=nonneg_int, default=0, metavar="N",
-                   help="SBC drones of the emcee route (default: %(default)s)")
+                   help="SBC drones of the emcee route, on which both routes form the route table that names "
+                        "the file's default route (default: %(default)s: no table, the amortized route)")
+    p.add_argument("--no-summary", action="store_true",
+                   help="no summary likelihood (the emcee route then uses the likelihood ratio network)")
+    p.add_argument("--near-simulations", type=count(0, MAX_SIMULATIONS), default=None, metavar="N",
+                   help="drones simulated near the class reference (the specimen model at 4 x its spreads) for "
+                        "the summary likelihood, beside the prior's (default: half of --simulations)")
+    p.add_argument("--summary-epochs", type=positive_int, default=None, metavar="N",
+                   help="most epochs of the summary likelihood's networks (default: 300 and 150, early stopping "
+                        "first)")
     p.set_defaults(func=run_train)
     return p
 

@@ -1,10 +1,12 @@
 """Training an estimator is a job: simulate (resumable shards, workers), train the
 posterior and the ratio network (progress bar, early stopping, checkpoints, the
-device), end with its own SBC of both routes on fresh drones, save. It uses both
-:mod:`.amortized` and :mod:`.diagnostics` (the SBC), so it lives above them.
+device), then the summary likelihood (:mod:`.emulator`, on the same drones and on
+drones simulated near the class reference), end with its own SBC of both routes on
+fresh drones and the route table that names the file's default route, save. It uses
+:mod:`.amortized`, :mod:`.emulator` and :mod:`.diagnostics`, so it lives above them.
 
-Everything lives in one work folder (``sims/``, ``posterior.ckpt``, ``ratio.ckpt``);
-a rerun with the same arguments resumes where it stopped.
+Everything lives in one work folder (``sims/``, ``near/``, ``posterior.ckpt``,
+``ratio.ckpt``); a rerun with the same arguments resumes where it stopped.
 """
 from __future__ import annotations
 
@@ -24,6 +26,30 @@ from .diagnostics.routes import headline
 from .diagnostics.routes import run as run_sbc
 
 SBC_MEASUREMENTS = 5
+NEAR_WIDTH = 4.0
+"""Spreads of the drones simulated near the class reference for the summary likelihood,
+x the specimen model's defaults (speed 20%, amplitudes 60%: far wider than the drones
+of one model, narrower than the prior)."""
+
+
+def add_summary(est: AmortizedEstimator, vectors, profiles, work, *, n_near: int, near_width: float = NEAR_WIDTH,
+                seed: int = 0, workers: int = 1, shard_size: int = 500, config=None, progress=None,
+                log=print) -> AmortizedEstimator:
+    """Train the summary likelihood on the prior's drones (vectors, profiles) and n_near
+    drones simulated near the reference (``work/near``), and attach it to ``est``."""
+    from .emulator.train import EmulatorConfig, train_summary_model
+
+    if n_near:
+        near = replace(est.spec, near_width=float(near_width))
+        paths = simulate_shards(Path(work) / "near", near, n_near, seed=child_seed(seed, "near"), workers=workers,
+                                shard_size=shard_size, progress=progress, log=log)
+        xn, yn = load_shards(paths)
+        vectors, profiles = np.concatenate([vectors, xn]), np.concatenate([profiles, yn])
+    model, report = train_summary_model(vectors, profiles, est.label_free, est.class_name, est.spec.acquisition,
+                                        est.spec.radar, config or EmulatorConfig(), seed=child_seed(seed, "summary"),
+                                        log=lambda m: log(f"  summary likelihood: {m}"))
+    report.update(near_simulations=int(n_near), near_width=float(near_width))
+    return est.with_summary(model, report)
 
 
 def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed: int = 0, workers: int = 1,
@@ -31,12 +57,15 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
                     post_budget: float | None = None, ratio_budget: float | None = None,
                     sim_budget: float | None = None,
                     sbc_truths: int = 300, sbc_mcmc_truths: int = 0, mcmc_settings=None, shard_size: int = 500,
-                    command: str | None = None, progress=None, log=print) -> AmortizedEstimator:
+                    summary: bool = True, near_simulations: int | None = None, near_width: float = NEAR_WIDTH,
+                    summary_cfg=None, command: str | None = None, progress=None, log=print) -> AmortizedEstimator:
     """The whole job (module doc); writes the estimator to ``out`` and returns it.
     post_budget, ratio_budget: training seconds of each network (default: the
     train_cfg's time budget); sim_budget: simulation seconds (training then uses the
-    drones simulated by then); command: the command line that ran the job (kept in the
-    file, so anyone can train it again)."""
+    drones simulated by then); summary: train the summary likelihood too, on the prior's
+    drones and ``near_simulations`` (default: half as many) drones of the specimen model
+    around the reference at ``near_width`` x its spreads; command: the command line that
+    ran the job (kept in the file, so anyone can train it again)."""
     import torch
 
     t0 = time.perf_counter()
@@ -64,6 +93,10 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
         log(f"  {name}: {tl.epochs} epochs, best validation loss {tl.best_val:.4f} at epoch {tl.best_epoch} "
             f"({tl.stopped}), {tl.seconds:.0f} s")
     del x
+    if summary:
+        n_near = n_simulations // 2 if near_simulations is None else int(near_simulations)
+        add_summary(est, vectors, profiles, work, n_near=n_near, near_width=near_width, seed=seed, workers=workers,
+                    shard_size=shard_size, config=summary_cfg, progress=progress, log=log)
     est.meta.update(n_simulations=int(len(u)), seed=int(seed), simulation_seconds=t_sim, command=command,
                     training={"config": train_cfg.to_dict(), "device": str(dev), **logs}, sbc={})
     est.save(out)  # usable now; rewritten with its SBC figures below
@@ -71,6 +104,7 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
         est.meta["sbc"] = estimator_sbc(est, sbc_truths, seed=child_seed(seed, "sbc"), workers=workers,
                                         mcmc_truths=sbc_mcmc_truths, mcmc_settings=mcmc_settings,
                                         progress=progress, log=log)
+        est.meta["default_route"] = (est.meta["sbc"].get("route_table") or {}).get("default") or "amortized"
     est.meta["job_seconds"] = time.perf_counter() - t0
     est.save(out)
     log(f"estimator written to {out} ({time.perf_counter() - t0:.0f} s in all)")
@@ -97,8 +131,6 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
                   mcmc_settings=None, progress=None, log=print) -> dict:
     """SBC of the amortized route on n_truths fresh drones (5 measurements each), and
     of the emcee route on the first ``mcmc_truths`` of them."""
-    from .amortized.mcmc import LearnedPosterior, sample
-
     lf = est.label_free
     vectors, profiles = sbc_data(est.spec, n_truths, seed, workers)
     truths = lf.quantities(vectors)
@@ -118,20 +150,46 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
     out["amortized"]["inside_prior_share"] = float(np.mean(accepted))
     log(f"  SBC amortized: {headline(out['amortized'])}; draws inside the prior {np.mean(accepted):.3f}")
     if mcmc_truths:
+        from .diagnostics.yardsticks import route_table
         from .settings import CalibrationSettings
 
         settings = mcmc_settings or CalibrationSettings(progress=False)
-
-        def mcmc(y, n, s):
-            u, _ = est.sample_u(y, 1000, s, strict=False)
-            post = LearnedPosterior(est, y)
-            run, _ = sample(post, u, settings, s)
-            draws = run.draws()
-            pick = np.linspace(0, len(draws) - 1, n).round().astype(int)
-            return lf.from_unbounded(draws[pick]), run.converged
-
         k = min(mcmc_truths, n_truths)
-        out["emcee"] = run_sbc(mcmc, truths[:k], profiles[:k], lf.names, prior_q=prior_q, seed=seed,
-                               to_unbounded=lf.to_unbounded, progress=progress, desc="SBC emcee")
-        log(f"  SBC emcee: {headline(out['emcee'])}; converged {out['emcee']['converged_share']:.2f}")
+        table = route_table({"amortized": amortized, "emcee": emcee_route(est, settings)}, truths[:k], profiles[:k],
+                            lf.names, to_unbounded=lf.to_unbounded, seed=seed, progress=progress)
+        out["emcee"] = table["rows"]["emcee"]
+        out["emcee"]["likelihood"] = est.likelihood_name
+        out["route_table"] = {"drones": int(k), "default": table["default"],
+                              "rows": {n: _row(r) for n, r in table["rows"].items()}}
+        log(f"  SBC emcee ({est.likelihood_name} likelihood): {headline(out['emcee'])}; converged "
+            f"{out['emcee']['converged_share']:.2f}")
+        log(f"  route table on {k} drones: default route {table['default']}")
     return out
+
+
+def emcee_route(est: AmortizedEstimator, settings):
+    """The emcee route as an SBC ``draw``: nlopt + emcee on the file's likelihood, started
+    from the amortized draws (resampled by importance weight when the likelihood is the
+    summary one), as :func:`.amortized.calibrate.calibrate_amortized` runs it."""
+    from .amortized.mcmc import sample
+
+    lf = est.label_free
+
+    def draw(y, n, s):
+        u, _ = est.sample_u(y, 1000, s, strict=False)
+        log_q = est.log_prob_u(u, y) if est.summary is not None else None
+        run, _ = sample(est.target(y), u, settings, s, log_q=log_q)
+        draws = run.draws()
+        pick = np.linspace(0, len(draws) - 1, n).round().astype(int)
+        return lf.from_unbounded(draws[pick]), run.converged
+
+    return draw
+
+
+def _row(summary: dict) -> dict:
+    """A route table row: the gate's figures, the log score, the widths, convergence, seconds."""
+    keep = ("outer_share", "coverage90_range", "tarp_atc", "log_score", "width_over_truth", "converged_share",
+            "n_replicates", "verdict")
+    row = {k: summary[k] for k in keep if k in summary}
+    row["seconds_median"] = float(np.median(summary["seconds"]))
+    return row

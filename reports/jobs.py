@@ -77,11 +77,10 @@ def calibrate_class(job: dict) -> dict:
         checkpoint = out / "posteriors" / f"{name}.chain.h5"
         seed = job["seed"] if k == 0 else child_seed(job["seed"], "drone", drone)
         if amortized:  # an out-of-range warning lands in the diagnostics, which the report shows
-            with warnings.catch_warnings():  # the emcee route beside the first drone's only: the population
-                warnings.simplefilter("ignore", UserWarning)  # and the strategies use the amortized draws
+            with warnings.catch_warnings():  # every drone by the estimator's default route, nothing beside it
+                warnings.simplefilter("ignore", UserWarning)
                 res = calibrate_amortized(X[drones == drone], cls, acquisition=job["acquisition"],
-                                          settings=job["settings"], random_state=seed,
-                                          emcee=k == 0).record_specimens([drone])
+                                          settings=job["settings"], random_state=seed).record_specimens([drone])
         else:
             res = calibrate(X[drones == drone], cls, acquisition=job["acquisition"], settings=job["settings"],
                             random_state=seed, backend_path=checkpoint).record_specimens([drone])

@@ -15,10 +15,13 @@ from mdaug.inference.amortized.estimator import AmortizedEstimator, EstimatorErr
 from mdaug.inference.amortized.nets import NetConfig  # noqa: E402
 from mdaug.inference.amortized.simulate import SimulationSpec, simulate  # noqa: E402
 from mdaug.inference.amortized.target import DroneSpace, LabelFree  # noqa: E402
+from mdaug.inference.emulator.train import EmulatorConfig  # noqa: E402
 from mdaug.inference.space.priors import Priors, engine_lines  # noqa: E402
 
 TINY = NetConfig(channels=(2, 4, 4, 4), trial_out=8, set_hidden=16, set_out=8, flow_hidden=16, flow_transforms=2,
                  ratio_hidden=16)
+TINY_SUMMARY = EmulatorConfig(n_offsets=64, n_components=4, hidden=16, depth=1, cov_hidden=16, epochs=3, cov_epochs=3,
+                              n_calibration=3)
 
 
 @pytest.fixture(scope="module")
@@ -32,7 +35,7 @@ def tiny(tmp_path_factory):
     spec = SimulationSpec("HELI", Acquisition.measured(4), 4)
     est = train_estimator(spec, 120, d / "work", d / "heli-k4.zip", seed=3, device="cpu", net_cfg=TINY,
                           train_cfg=TrainConfig(batch=32, max_epochs=2), sbc_truths=0, shard_size=60,
-                          progress=False, log=lambda m: None)
+                          near_simulations=60, summary_cfg=TINY_SUMMARY, progress=False, log=lambda m: None)
     return est, d / "heli-k4.zip"
 
 
@@ -335,12 +338,19 @@ def test_calibrate_verb_writes_an_amortized_posterior(tiny, tmp_path, capsys):
     text = capsys.readouterr()
     assert status == 0, text.err
     assert "posterior used by the strategies: amortized" in text.out
-    assert "emcee on the learned likelihood" in text.out
+    assert "emcee" not in text.out.split("posterior used")[0]  # the default route only: nothing ran beside it
     res = CalibrationResult.load(out, class_name="HELI")  # check_content: variables, dims, prior bounds
     assert res.amortized and res.marginal and res.n_measurements == 3
     assert res.draws().shape == (4000, 13)
-    assert "other_route" in res.idata.groups()
+    assert "other_route" not in res.idata.groups()
     assert res.acquisition.ramps == 4
+    checked = tmp_path / "checked.nc"
+    status = main(["calibrate", str(data), "--class", "HELI", "--out", str(checked), "--estimator", str(path),
+                   "--max-steps", "200", "--time-budget", "20", "--seed", "5", "--check-route"])
+    text = capsys.readouterr()
+    assert status == 0, text.err
+    assert "nlopt + emcee on the summary likelihood (run as a check)" in text.out
+    assert "other_route" in CalibrationResult.load(checked, class_name="HELI").idata.groups()
 
 
 def test_calibrate_verb_refuses_what_the_estimator_cannot_take(tiny, tmp_path, refused):
@@ -385,7 +395,7 @@ def test_train_estimator_and_sbc_verbs(tmp_path, capsys, refused):
 
     out = tmp_path / "h.zip"
     argv = ["train-estimator", "--class", "HELI", "--ramps", "4", "--simulations", "100", "--measurements", "3",
-            "--epochs", "1", "--sbc-truths", "0", "--out", str(out)]
+            "--epochs", "1", "--sbc-truths", "0", "--near-simulations", "30", "--summary-epochs", "2", "--out", str(out)]
     assert main(argv) == 0, capsys.readouterr().err
     meta = AmortizedEstimator.load(out).meta
     assert meta["n_simulations"] == 100
@@ -459,3 +469,64 @@ def test_simulation_shards_resume_under_older_keys_and_refuse_another_seed(tmp_p
     assert all(np.array_equal(np.load(p)["vectors"], first[p.name]) for p in again)
     with pytest.raises(ValueError, match="holds simulations of another spec or seed"):
         simulate_shards(folder, spec, 4, seed=4, shard_size=2)
+
+
+def test_the_summary_likelihood_round_trips_through_the_estimator_file(tiny):
+    est, path = tiny
+    back = AmortizedEstimator.load(path)
+    assert est.summary is not None and back.summary is not None
+    assert back.likelihood_name == "summary" and back.default_route == "amortized"  # no route table: sbc_truths=0
+    u = est.label_free.to_unbounded(est.label_free.quantities(est.spec.space().vectors(
+        est.spec.space().sample_prior(4, np.random.default_rng(5)))))
+    m1, c1 = est.summary.moments(u, 5)
+    m2, c2 = back.summary.moments(u, 5)
+    np.testing.assert_allclose(m2, m1, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(c2, c1, rtol=1e-6, atol=1e-6)
+    assert c1.shape == (4, 4, 4) and np.all(np.linalg.eigvalsh(c1) > 0)
+    meta = back.meta["summary"]
+    assert meta["inflation"] >= 1 and meta["error_scale"] >= 0 and meta["training"]["near_simulations"] == 60
+
+
+def _rewrite(path, tmp_path, name, change):
+    with zipfile.ZipFile(path) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    meta = json.loads(members["meta.json"])
+    change(members, meta)
+    members["meta.json"] = json.dumps(meta).encode()
+    p = tmp_path / name
+    with zipfile.ZipFile(p, "w") as z:
+        for k, v in members.items():
+            z.writestr(k, v)
+    return p
+
+
+@pytest.mark.parametrize("name, change, text", [
+    ("nosum.zip", lambda m, meta: m.pop("summary.pt"), "member 'summary.pt' is missing"),
+    ("nometa.zip", lambda m, meta: meta.pop("summary"), "field 'summary' is missing"),
+    ("infl.zip", lambda m, meta: meta["summary"].__setitem__("inflation", 0.5), "'summary.inflation' must be >= 1"),
+    ("nan.zip", lambda m, meta: meta["summary"].__setitem__("error_scale", float("nan")), "'summary.error_scale'"),
+    ("dim.zip", lambda m, meta: meta["summary"]["net"].__setitem__("dim", 9), "'summary.net.dim' is 9"),
+    ("route.zip", lambda m, meta: meta.__setitem__("default_route", "fast"), "field 'default_route' is 'fast'"),
+    ("weights.zip", lambda m, meta: m.__setitem__("summary.pt", m["ratio.pt"]), "member 'summary.pt'"),
+])
+def test_a_damaged_summary_likelihood_is_refused_by_field(tiny, tmp_path, name, change, text):
+    _, path = tiny
+    bad = _rewrite(path, tmp_path, name, change)
+    with pytest.raises(EstimatorError, match=f"{name}: .*{text}" if "member" not in text else text):
+        AmortizedEstimator.load(bad)
+
+
+def test_emcee_route_on_the_summary_likelihood_reports_its_likelihood_and_bound(tiny):
+    from mdaug.inference.amortized.calibrate import calibrate_amortized
+    from mdaug.inference.settings import CalibrationSettings
+
+    est, _ = tiny
+    _, y = simulate(est.spec, 1, 21)
+    res = calibrate_amortized(y[0], "HELI", acquisition=est.spec.acquisition, estimator=est, route="emcee",
+                              settings=CalibrationSettings(time_budget=5, check_every=50), random_state=2)
+    d = res.diagnostics
+    assert d["route"] == "emcee" and d["emcee"]["likelihood"] == "summary"
+    assert set(d["emcee"]["crb"]) == set(est.label_free.names)
+    assert all(v > 0 for v in d["emcee"]["crb"].values())
+    assert "other_route" not in res.idata.groups()  # the amortized route ran only to start the walkers
+    assert "summary likelihood" in res.meta["likelihood"]["likelihood"]

@@ -237,7 +237,7 @@ def test_recovery_of_the_lines_from_five_scene_acquisitions():
     from mdaug.inference.space.priors import engine_lines
 
     camp = simulate_campaign("HELI", 1, 5, 11, scene=SceneConfig().with_acquisition(ramps=32).with_specimens(width=0.0))
-    res = calibrate_amortized(camp.profiles, "HELI", acquisition=Acquisition.measured(32), emcee=False,
+    res = calibrate_amortized(camp.profiles, "HELI", acquisition=Acquisition.measured(32), route="amortized",
                               random_state=1)
     w_true = np.sort(engine_lines(HELI.to_array().reshape(1, 13))[0][0])
     lo, hi = np.quantile(res.lines()[:, 0, :, 0], [0.05, 0.95], axis=0)

@@ -1,12 +1,13 @@
 """calibrate_amortized(): measured profiles of one drone -> a CalibrationResult, with no
 training: the class's trained estimator (:mod:`.shipped` or a file).
 
-Two posteriors, learned apart from the same simulations and each judged by the SBC
-stored in the estimator: the amortized posterior (draws in milliseconds), and nlopt +
-emcee on the learned likelihood (:mod:`.mcmc`). The posterior group holds the one
-the strategies use (``route``, default the amortized one: its SBC ran on the most
-truths and it needs no chain); the other lands in the group ``other_route`` beside
-it, with its diagnostics in the metadata. Both are in the class-vector variables of
+Two routes, each judged by the SBC and the route table stored in the estimator: the
+amortized posterior (draws in milliseconds), and nlopt + emcee on the file's
+likelihood (:mod:`.mcmc`; the summary likelihood of :mod:`mdaug.inference.emulator`
+where the file has one, started from the amortized draws resampled by importance
+weight). ``route`` None takes the file's default route (the best log score among the
+routes that pass SBC); the other route runs only when asked (``check=True``) and
+lands in the group ``other_route`` beside it, with its diagnostics in the metadata. Both are in the class-vector variables of
 every mdaug posterior (Gamma, A_a, ..., C_m per engine, phases marginalised).
 
 Out of range: when the amortized posterior leaks (under half the share of draws inside
@@ -30,32 +31,33 @@ from ...radar.seeds import child_seed, seed_sequence
 from ..likelihood.base import prepare_measured
 from ..space.priors import SHARED
 from ..result.posterior import FORMAT, IDENTIFIED_RATIO, CalibrationResult, import_arviz
+from .estimator import ROUTES
 from .shipped import find
 
-ROUTES = ("amortized", "emcee")
 LEAK_FACTOR = 0.5  # draws inside the prior below this share of the estimator's own SBC drones': out of range
 DISAGREE_LIMIT = 0.25  # share of quantities whose emcee median leaves the amortized 98% interval
 
 
 def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None = None, estimator=None,
-                        settings=None, random_state=None, n_draws: int = 4000, route: str = "amortized",
-                        emcee: bool = True, radar: RadarConfig = RadarConfig(), source: str = "measured profiles"):
+                        settings=None, random_state=None, n_draws: int = 4000, route: str | None = None,
+                        check: bool = False, radar: RadarConfig = RadarConfig(), source: str = "measured profiles"):
     """Calibrate one drone (module doc). estimator: an :class:`.estimator.AmortizedEstimator`,
     a path, or None (the shipped one for the class and acquisition); settings: the
     :class:`~mdaug.inference.settings.CalibrationSettings` of the emcee route (its
-    time budget, 50-tau rule, progress); emcee: False skips that route."""
+    time budget, 50-tau rule, progress); route: 'amortized', 'emcee' or None (the
+    estimator's default route); check: also run the other route, as a check."""
     from ..settings import CalibrationSettings
     from .estimator import AmortizedEstimator, EstimatorError
-    from .mcmc import LearnedPosterior, sample
+    from .mcmc import sample
 
-    if route not in ROUTES:
+    if route is not None and route not in ROUTES:
         raise ValueError(f"route must be one of {ROUTES}, got {route!r}")
-    if route == "emcee" and not emcee:
-        raise ValueError("route 'emcee' needs the emcee route (emcee=True)")
     ref = load_reference(reference) if isinstance(reference, str) else reference
     acquisition = acquisition if acquisition is not None else Acquisition.measured(1)
     settings = settings if settings is not None else CalibrationSettings()
     est = estimator if isinstance(estimator, AmortizedEstimator) else find(ref.name, acquisition, radar, path=estimator)
+    route = est.default_route if route is None else route
+    run_emcee = route == "emcee" or check
     data, shifts = prepare_measured(profiles, radar, "peak", what=f"{source} of class {ref.name}")
     est.check_data(data, acquisition, radar, source)
     lf = est.label_free
@@ -67,18 +69,22 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
         raise EstimatorError(f"{source}: {exc}") from None
     t_amortized = time.perf_counter() - t0
     x_amortized, _ = lf.vectors(lf.from_unbounded(u))
-    diag = {"sampler": "amortized", "route": route, "amortized_seconds": t_amortized,
-            "amortized_inside_prior": float(inside), "estimator": _estimator_info(est)}
+    diag = {"sampler": "amortized" if route == "amortized" else "emcee", "route": route,
+            "amortized_seconds": t_amortized, "amortized_inside_prior": float(inside),
+            "estimator": _estimator_info(est)}
     x_emcee = None
-    if emcee:
+    if run_emcee:
         from threadpoolctl import threadpool_limits
 
         with threadpool_limits(settings.threads):
-            post = LearnedPosterior(est, data)
-            run, fit = sample(post, u[:1000], settings, child_seed(ss, "emcee"))
+            post = est.target(data)
+            start = u[:1000]
+            log_q = est.log_prob_u(start, data) if est.summary is not None else None
+            run, fit = sample(post, start, settings, child_seed(ss, "emcee"), log_q=log_q)
         x_emcee = post.vectors(run.draws())
         names = post.label_free.names
         diag["emcee"] = {"converged": bool(run.converged), "reason": run.reason, "seconds": float(run.seconds),
+                         "likelihood": est.likelihood_name,
                          "tau_max": float(run.tau.max()), "steps": int(run.n_steps),
                          "steps_over_tau": float(run.n_steps / run.tau.max()),
                          "acceptance_mean": float(run.acceptance.mean()), "n_walkers": int(run.chain.shape[1]),
@@ -86,10 +92,13 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
                          "evaluations": int(post.n_calls)}
         diag.update({k: diag["emcee"][k] for k in ("n_walkers", "steps_over_tau", "ess_min", "acceptance_mean",
                                                     "tau_max")}, chain_steps=diag["emcee"]["steps"])
+        if est.summary is not None:
+            diag["emcee"]["crb"] = _crb(post, np.median(run.draws(), axis=0))
     diag["seconds"] = time.perf_counter() - t0
     typical = est.meta.get("sbc", {}).get("amortized", {}).get("inside_prior_share", 1.0)
     diag["out_of_range"], diag["out_of_range_why"] = _out_of_range(lf, x_amortized, x_emcee, inside, typical)
     chosen = x_amortized if route == "amortized" else x_emcee
+    diag["widths"] = _widths(lf, chosen, diag.get("emcee", {}).get("crb", {}) if route == "emcee" else {})
     if route == "amortized":
         diag.update(converged=True, reason="amortized posterior: exact draws from the trained estimator "
                     f"(SBC in the estimator file: {_sbc_line(est, 'amortized')})")
@@ -97,7 +106,31 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
         diag.update(converged=diag["emcee"]["converged"], reason=diag["emcee"]["reason"])
     if diag["out_of_range"]:
         warnings.warn(f"{source}: {diag['out_of_range_why']}", stacklevel=2)
-    return _result(ref, est, data, shifts, chosen, x_emcee if route == "amortized" else x_amortized, diag, n_draws)
+    other = None if not check else (x_emcee if route == "amortized" else x_amortized)
+    return _result(ref, est, data, shifts, chosen, other, diag, n_draws)
+
+
+def _widths(lf, x: np.ndarray, crb: dict) -> dict:
+    """Median and 90% interval of every label-free quantity of draws x, with the
+    Cramer-Rao bound's 90% width (2 x 1.645 sd) where one is given."""
+    q = lf.quantities(x)
+    lo, med, hi = np.quantile(q, [0.05, 0.5, 0.95], axis=0)
+    out = {}
+    for j, name in enumerate(lf.names):
+        out[name] = {"median": float(med[j]), "q05": float(lo[j]), "q95": float(hi[j])}
+        if name in crb:
+            out[name]["crb_width"] = 2 * 1.645 * float(crb[name])
+    return out
+
+
+def _crb(post, u) -> dict:
+    """Cramer-Rao sd of every label-free quantity at the posterior median u (the summary
+    likelihood's Fisher information for these measurements)."""
+    try:
+        sd = post.crb_quantities(np.asarray(u, float))
+    except (np.linalg.LinAlgError, ValueError):
+        return {}
+    return dict(zip(post.label_free.names, map(float, sd)))
 
 
 def _estimator_info(est) -> dict:
@@ -148,6 +181,15 @@ def _out_of_range(lf, x_amortized, x_emcee, inside: float, typical: float) -> tu
     return False, ""
 
 
+def _likelihood_words(est, route: str) -> str:
+    if route == "amortized":
+        return "simulation-based (the amortized posterior of the trained estimator)"
+    if est.summary is not None:
+        return ("simulation-based summary likelihood (the folded mean log-profile; emulated mean and "
+                "within-drone covariance, the emulator's error included)")
+    return "simulation-based (a learned likelihood ratio per measurement)"
+
+
 def _group(x: np.ndarray, e: int) -> dict:
     xe = x.reshape(len(x), e, -1)
     return {name: xe[None, :, :, IDX[name]] for name in ("Gamma",) + SHARED}
@@ -171,7 +213,7 @@ def _result(ref, est, data, shifts, chosen, other, diag, n_draws) -> Calibration
     meta = {"format": FORMAT, "class_name": ref.name, "n_engines": e, "n_measurements": int(len(data)),
             "settings": {"route": diag["route"], "n_draws": int(n_draws)}, "priors": est.priors.to_dict(),
             "radar": est.spec.radar.to_dict(), "acquisition": est.spec.acquisition.to_dict(),
-            "likelihood": {"likelihood": "simulation-based (amortized posterior; learned likelihood for emcee)"},
+            "likelihood": {"likelihood": _likelihood_words(est, diag["route"])},
             "marginal": True, "amortized": True,
             "fit": diag.get("emcee", {}).get("fit", {}), "best_fit": median.tolist(),
             "recentred_shifts": np.asarray(shifts).tolist(), "diagnostics": diag,

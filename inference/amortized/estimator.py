@@ -3,8 +3,10 @@
 File: a ZIP of ``meta.json`` (format, class, radar, acquisition, prior, simulator
 version, simulations, network and training settings, SBC figures) and two torch
 state dicts, ``posterior.pt`` (the amortized posterior q(u | measurements)) and
-``ratio.pt`` (the per-measurement likelihood ratio of the emcee path), read with
-``torch.load(weights_only=True)``. Loading checks every field and refuses, by name,
+``ratio.pt`` (the per-measurement likelihood ratio of the emcee path), and optionally
+``summary.pt`` with the meta field ``summary`` (the summary likelihood of
+:mod:`mdaug.inference.emulator`, which the emcee route then uses instead of the
+ratio), read with ``torch.load(weights_only=True)``. Loading checks every field and refuses, by name,
 an estimator of another class, radar or acquisition than the data's, with the
 command that trains the right one.
 """
@@ -28,6 +30,11 @@ from .target import TARGET, LabelFree
 
 FORMAT = "mdaug-estimator-1"
 MEMBERS = ("meta.json", "posterior.pt", "ratio.pt")
+SUMMARY_MEMBER = "summary.pt"
+"""Optional member: the summary likelihood's weights (with meta field 'summary')."""
+ROUTES = ("amortized", "emcee")
+"""The routes of a calibration: the amortized posterior's exact draws, or nlopt +
+emcee on the file's likelihood (the summary likelihood where the file has one)."""
 META_FIELDS = ("format", "spec", "prior", "net", "n_simulations", "label_free", "training", "sbc", "seed")
 
 
@@ -44,8 +51,9 @@ class AmortizedEstimator:
     """Posterior and ratio networks of one class and acquisition (module doc)."""
 
     def __init__(self, spec: SimulationSpec, net_cfg: NetConfig, posterior: torch.nn.Module, ratio: RatioNet,
-                 meta: dict | None = None):
+                 meta: dict | None = None, summary=None):
         self.spec, self.net_cfg = spec, net_cfg
+        self.summary = summary  # a SummaryModel (mdaug.inference.emulator) or None
         self.posterior, self.ratio = posterior.eval(), ratio.eval()
         ref = spec.reference
         self.priors = spec.priors()
@@ -57,6 +65,43 @@ class AmortizedEstimator:
     @property
     def class_name(self) -> str:
         return self.spec.class_name
+
+    @property
+    def default_route(self) -> str:
+        """The route a calibration takes unless told: the file's ``default_route`` (set
+        by its route table: the best log score among the routes that pass SBC), else
+        the amortized posterior."""
+        return self.meta.get("default_route", "amortized")
+
+    @property
+    def likelihood_name(self) -> str:
+        """The emcee route's likelihood: 'summary' (the file has one) or 'ratio'."""
+        return "ratio" if self.summary is None else "summary"
+
+    def target(self, profiles: np.ndarray):
+        """The emcee route's target for these measurements (M, L): the summary
+        likelihood's posterior where the file has one, else the ratio network's; both
+        vectorised callables u (W, d) -> (W,) with ``dim``, ``label_free``, ``vectors``."""
+        if self.summary is not None:
+            from ..emulator.posterior import EmulatedPosterior
+
+            return EmulatedPosterior(self.summary, profiles)
+        from .mcmc import LearnedPosterior
+
+        return LearnedPosterior(self, profiles)
+
+    def with_summary(self, model, report: dict | None = None, default_route: str | None = None) -> "AmortizedEstimator":
+        """This estimator carrying a summary likelihood (and the route table's default)."""
+        from ..emulator.model import to_parts
+
+        meta, _ = to_parts(model, report)
+        self.summary = model
+        self.meta["summary"] = meta
+        if default_route is not None:
+            if default_route not in ROUTES:
+                raise ValueError(f"default_route must be one of {ROUTES}, got {default_route!r}")
+            self.meta["default_route"] = default_route
+        return self
 
     @property
     def max_measurements(self) -> int:
@@ -161,9 +206,16 @@ class AmortizedEstimator:
     def save(self, path) -> Path:
         """Write the ZIP atomically (no half-written file)."""
         blobs = {"meta.json": json.dumps(self.meta, indent=1, default=float).encode()}
-        for name, net in (("posterior.pt", self.posterior), ("ratio.pt", self.ratio)):
+        states = {"posterior.pt": self.posterior.state_dict(), "ratio.pt": self.ratio.state_dict()}
+        if self.summary is not None:
+            from ..emulator.model import to_parts
+
+            summary_meta, states[SUMMARY_MEMBER] = to_parts(self.summary, self.meta.get("summary", {}).get("training"))
+            self.meta["summary"] = summary_meta
+            blobs["meta.json"] = json.dumps(self.meta, indent=1, default=float).encode()
+        for name, state in states.items():
             buf = io.BytesIO()
-            torch.save({k: v.detach().cpu() for k, v in net.state_dict().items()}, buf)
+            torch.save({k: v.detach().cpu() for k, v in state.items()}, buf)
             blobs[name] = buf.getvalue()
 
         def write(fh):
@@ -190,7 +242,8 @@ class AmortizedEstimator:
                 missing = [m for m in MEMBERS if m not in names]
                 if missing:
                     raise EstimatorError(f"{src}: not an mdaug estimator (member {missing[0]!r} missing)")
-                blobs = {m: _read_member(z, m, src) for m in MEMBERS}
+                blobs = {m: _read_member(z, m, src) for m in MEMBERS + ((SUMMARY_MEMBER,) if SUMMARY_MEMBER in names
+                                                                         else ())}
         except EstimatorError:
             raise
         except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, RuntimeError, ValueError, KeyError,
@@ -201,7 +254,8 @@ class AmortizedEstimator:
             meta = json.loads(blobs["meta.json"])
         except (ValueError, RecursionError) as exc:
             raise EstimatorError(f"{src}: member 'meta.json' is not JSON ({_first_line(exc)})") from None
-        states = {m: _load_state(blobs[m], m, src, device) for m in MEMBERS[1:]}
+        states = {m: _load_state(blobs[m], m, src, "cpu" if m == SUMMARY_MEMBER else device)
+                  for m in blobs if m != "meta.json"}
         if not isinstance(meta, dict):
             raise EstimatorError(f"{src}: member 'meta.json' is not a JSON table")
         absent = [k for k in META_FIELDS if k not in meta]
@@ -237,11 +291,33 @@ class AmortizedEstimator:
         est.posterior.eval()
         est.ratio.eval()
         est.meta = meta
+        est.summary = _summary(meta, states.get(SUMMARY_MEMBER), est, src)
         return est
 
 
+def _summary(meta: dict, state: dict | None, est: AmortizedEstimator, src: str):
+    """The file's summary likelihood, or None; refuses a field without its member (or
+    the reverse), a default route that is not a route, and anything from_parts refuses."""
+    from ..emulator.model import from_parts
+
+    route = meta.get("default_route", "amortized")
+    if route not in ROUTES:
+        raise EstimatorError(f"{src}: meta.json field 'default_route' is {route!r}; expected one of {', '.join(ROUTES)}")
+    if state is None and "summary" not in meta:
+        return None
+    if state is None or "summary" not in meta:
+        what = f"member {SUMMARY_MEMBER!r}" if state is None else "meta.json field 'summary'"
+        raise EstimatorError(f"{src}: {what} is missing (the summary likelihood needs both)")
+    try:
+        return from_parts(meta["summary"], state, est.class_name, est.spec.acquisition, est.spec.radar,
+                          est.label_free, src)
+    except ValueError as exc:
+        raise EstimatorError(str(exc)) from None
+
+
 # ---- reading a file as untrusted input -------------------------------------------------------------
-MEMBER_LIMITS = {"meta.json": 16 * 2 ** 20, "posterior.pt": 512 * 2 ** 20, "ratio.pt": 512 * 2 ** 20}
+MEMBER_LIMITS = {"meta.json": 16 * 2 ** 20, "posterior.pt": 512 * 2 ** 20, "ratio.pt": 512 * 2 ** 20,
+                 SUMMARY_MEMBER: 64 * 2 ** 20}
 """Largest size (bytes, uncompressed) of each member, checked against the ZIP's
 declared size before any byte is decompressed and again while reading (the shipped
 files: meta.json 40-130 KB, weights 0.6-3 MB)."""

@@ -12,7 +12,9 @@ Starts come from amortized draws: nlopt (a local derivative-free polish, BOBYQA 
 box around the draws) from the best of them, emcee's walkers from others; the
 sampler is the calibration's one emcee driver
 (:func:`mdaug.inference.samplers.emcee_run.run_ensemble`: DE moves, 50 tau with tau stable, time
-budget, Ctrl-C), so the same convergence rule applies. (Proposing a share of the moves
+budget, Ctrl-C), so the same convergence rule applies, with emcee's own moves for a
+smooth target (:func:`~mdaug.inference.samplers.emcee_run.smooth_moves`: no phases,
+no labelling symmetry in these coordinates). (Proposing a share of the moves
 from the amortized posterior, independence Metropolis-Hastings, was tried and dropped:
 on the default study's drones it left tau where it was, 140-160 steps HELI, 200-210
 QUAD, at 2-3x the seconds per step, the flow's density being the dear part.)
@@ -24,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...radar.seeds import seed_sequence
-from ..samplers.emcee_run import run_ensemble
+from ..samplers.emcee_run import run_ensemble, smooth_moves
 from ..samplers.base import SamplerRun
 
 
@@ -87,27 +89,42 @@ def polish(post: LearnedPosterior, starts: np.ndarray, max_eval: int = 400) -> t
     return best_u, float(best_v)
 
 
-def sample(post: LearnedPosterior, u_draws: np.ndarray, settings, seed, *,
-           n_polish: int = 4) -> tuple[SamplerRun, dict]:
+def sample(post, u_draws: np.ndarray, settings, seed, *, n_polish: int = 4,
+           log_q: np.ndarray | None = None) -> tuple[SamplerRun, dict]:
     """The fit and the chain (module doc). u_draws: amortized draws (n, d) to start
-    from. Returns the emcee run and the fit's summary."""
+    from; log_q: their amortized log density (n,) or None. With it, the walkers start
+    from the draws resampled by importance weight p(u | x) / q(u): where the target
+    is, not spread over the (wider) amortized posterior, so the chain starts near its
+    stationary state. Returns the emcee run and the fit's summary."""
     import time
 
     t0 = time.perf_counter()
     lp = post(u_draws)
-    starts = u_draws[np.isfinite(lp)]
-    lp = lp[np.isfinite(lp)]
+    ok = np.isfinite(lp)
+    starts, lp = u_draws[ok], lp[ok]
     if len(starts) < 2:
         raise ValueError("too few amortized draws inside the prior to start the sampler")
+    rng = np.random.default_rng(seed_sequence(seed))
+    n_walkers = max(int(settings.n_walkers), 2 * post.dim + 2) if settings.n_walkers else max(2 * post.dim + 2, 32)
+    if log_q is not None:
+        logw = lp - np.asarray(log_q, float)[ok]
+        w = np.exp(logw - logw.max())
+        w /= w.sum()
+        ess = float(1.0 / np.sum(w * w))
+        pick = rng.choice(len(starts), size=n_walkers, replace=True, p=w)
+        if len(np.unique(pick)) < n_walkers:  # repeated draws: jitter them within the draws' spread
+            sd = 0.05 * starts.std(0)
+            p0 = starts[pick] + rng.standard_normal((n_walkers, starts.shape[1])) * sd
+        else:
+            p0 = starts[pick].copy()
+    else:
+        ess = float("nan")
+        pick = rng.choice(len(starts), size=n_walkers, replace=len(starts) < n_walkers)
+        p0 = starts[pick].copy()
     best = starts[np.argsort(lp)[::-1][:n_polish]]
     u_fit, v_fit = polish(post, best)
     fit = {"best": u_fit.tolist(), "log_post": v_fit, "start_log_post": float(lp.max()), "n_starts": len(best),
-           "seconds": time.perf_counter() - t0}
-    n_walkers = max(int(settings.n_walkers), 2 * post.dim + 2) if settings.n_walkers else max(2 * post.dim + 2, 32)
-    rng = np.random.default_rng(seed_sequence(seed))
-    pick = rng.choice(len(starts), size=n_walkers, replace=len(starts) < n_walkers)
-    p0 = starts[pick].copy()
+           "start_ess": ess, "seconds": time.perf_counter() - t0}
     p0[0] = u_fit
-    run = run_ensemble(post, p0, settings, int(rng.integers(2**31 - 1)), phase_cols=())
+    run = run_ensemble(post, p0, settings, int(rng.integers(2**31 - 1)), phase_cols=(), moves=smooth_moves())
     return run, fit
-

@@ -44,10 +44,16 @@ class SimulationSpec:
     acquisition: Acquisition
     n_measurements: int = 10
     radar: RadarConfig = field(default_factory=RadarConfig)
+    near_width: float = 0.0
+    """0: drones from the calibration prior; > 0: drones of the specimen model around the
+    class reference, its default spreads times ``near_width`` (where users' drones are;
+    the summary likelihood trains on both)."""
 
     def __post_init__(self) -> None:
         if isinstance(self.n_measurements, bool) or not 1 <= int(self.n_measurements) <= 64:
             raise ValueError(f"n_measurements must be an integer in 1..64, got {self.n_measurements!r}")
+        if not (isinstance(self.near_width, (int, float)) and np.isfinite(self.near_width) and self.near_width >= 0):
+            raise ValueError(f"near_width must be a finite number >= 0, got {self.near_width!r}")
 
     @property
     def reference(self):
@@ -60,19 +66,30 @@ class SimulationSpec:
         return DroneSpace(self.reference.n_engines, self.priors())
 
     def to_dict(self) -> dict:
-        return {"class_name": self.class_name, "acquisition": self.acquisition.to_dict(),
-                "n_measurements": int(self.n_measurements), "radar": self.radar.to_dict(),
-                "simulator": SIMULATOR}
+        d = {"class_name": self.class_name, "acquisition": self.acquisition.to_dict(),
+             "n_measurements": int(self.n_measurements), "radar": self.radar.to_dict(), "simulator": SIMULATOR}
+        if self.near_width:  # prior drones keep the key they always had
+            d["near_width"] = float(self.near_width)
+        return d
+
+    def sample_vectors(self, n: int, rng) -> np.ndarray:
+        """n drones' class vectors (n, 13E): from the prior, or near the reference (``near_width``)."""
+        if self.near_width:
+            from ...generator.specimens import SpecimenSpread
+
+            ref = self.reference.to_array()
+            return SpecimenSpread(width=float(self.near_width)).apply(np.repeat(ref[None], n, axis=0), rng)
+        space = self.space()
+        return space.vectors(space.sample_prior(n, rng))
 
 
 def simulate(spec: SimulationSpec, n: int, seed, scene=None) -> tuple[np.ndarray, np.ndarray]:
-    """n drones and their measurements: (vectors (n, 13E), profiles (n, M, L) float32
-    peak-normalised). Depends only on ``seed``."""
+    """n drones (:meth:`SimulationSpec.sample_vectors`) and their measurements: (vectors
+    (n, 13E), profiles (n, M, L) float32 peak-normalised). Depends only on ``seed``."""
     from ...generator.augment import Renderer
 
     truth_ss, data_ss = seed_sequence(seed).spawn(2)
-    space = spec.space()
-    x = space.vectors(space.sample_prior(n, seeded_rng(truth_ss)))
+    x = spec.sample_vectors(n, seeded_rng(truth_ss))
     m = spec.n_measurements
     renderer = Renderer(spec.acquisition, normalisation="none", radar=spec.radar, through_chain=True, scene=scene)
     raw = renderer.render(np.repeat(x, m, axis=0), seeded_rng(data_ss))
@@ -188,4 +205,4 @@ def load_shards(paths) -> tuple[np.ndarray, np.ndarray]:
 
 def spec_from_dict(d: dict) -> SimulationSpec:
     return SimulationSpec(d["class_name"], Acquisition.from_dict(d["acquisition"]), int(d["n_measurements"]),
-                          RadarConfig.from_dict(d["radar"]))
+                          RadarConfig.from_dict(d["radar"]), float(d.get("near_width", 0.0)))

@@ -129,3 +129,69 @@ def cramer_rao(info: np.ndarray) -> np.ndarray:
     blind = (np.abs(v[:, ~ok]) > 1e-9).any(axis=1)
     bound[np.diag_indices_from(bound)] = np.where(blind, np.inf, np.diag(bound))
     return bound
+
+
+SUMMARY_FORMAT = "mdaug-summary-1"
+"""Version of the summary likelihood's file parts (meta field 'summary.format')."""
+
+
+def to_parts(model: SummaryModel, report: dict | None = None) -> tuple[dict, dict]:
+    """(meta, state): the model as plain JSON numbers and one state dict of tensors
+    (the emulator's and covariance network's weights, the whitening), for a file read
+    with ``torch.load(weights_only=True)``."""
+    state = {f"net.{k}": v.detach().cpu() for k, v in model.net.state_dict().items()}
+    state.update({f"cov.{k}": v.detach().cpu() for k, v in model.cov_net.state_dict().items()})
+    for name in ("centre", "basis", "between"):
+        state[f"whitening.{name}"] = torch.as_tensor(np.asarray(getattr(model.whitening, name), np.float64))
+    meta = {"format": SUMMARY_FORMAT, "net": model.net.config(), "cov_net": model.cov_net.config(),
+            "error_scale": float(model.error_scale), "error_floor": float(model.error_floor),
+            "inflation": float(model.inflation), "training": dict(report or {})}
+    return meta, state
+
+
+def from_parts(meta: dict, state: dict, class_name: str, acquisition: Acquisition, radar: RadarConfig,
+               label_free: LabelFree, src: str) -> SummaryModel:
+    """The model of :func:`to_parts`' output; ValueError naming ``src`` and the field
+    that does not fit."""
+    if not isinstance(meta, dict) or meta.get("format") != SUMMARY_FORMAT:
+        got = meta.get("format") if isinstance(meta, dict) else meta
+        raise ValueError(f"{src}: meta.json field 'summary.format' is {got!r}; expected {SUMMARY_FORMAT!r}")
+    for key in ("error_scale", "error_floor", "inflation"):
+        v = meta.get(key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
+            raise ValueError(f"{src}: meta.json field 'summary.{key}' must be a finite number >= 0, got {v!r}")
+    if meta["inflation"] < 1:
+        raise ValueError(f"{src}: meta.json field 'summary.inflation' must be >= 1, got {meta['inflation']!r}")
+    nets = {}
+    for key, cls_, prefix in (("net", Emulator, "net."), ("cov_net", CovarianceNet, "cov.")):
+        cfg = meta.get(key)
+        want = ("dim", "n_offsets", "n_components", "hidden", "depth")
+        if not isinstance(cfg, dict) or sorted(cfg) != sorted(want) or not all(
+                isinstance(cfg[k], int) and not isinstance(cfg[k], bool) and 1 <= cfg[k] <= 4096 for k in want):
+            raise ValueError(f"{src}: meta.json field 'summary.{key}' must hold the integers {', '.join(want)}")
+        if cfg["dim"] != label_free.dim:
+            raise ValueError(f"{src}: meta.json field 'summary.{key}.dim' is {cfg['dim']}; class {class_name} has "
+                             f"{label_free.dim} label-free quantities")
+        net = cls_(**cfg)
+        sub = {k[len(prefix):]: v for k, v in state.items() if k.startswith(prefix)}
+        try:
+            net.load_state_dict(sub)
+        except (RuntimeError, KeyError, TypeError) as exc:
+            raise ValueError(f"{src}: member 'summary.pt' does not fit meta.json field 'summary.{key}' "
+                             f"({str(exc).splitlines()[0][:120]})") from None
+        if not all(torch.isfinite(t).all() for t in sub.values() if t.is_floating_point()):
+            raise ValueError(f"{src}: member 'summary.pt' holds NaN or inf weights ({prefix[:-1]})")
+        nets[key] = net.eval()
+    arrays = {}
+    for name in ("centre", "basis", "between"):
+        t = state.get(f"whitening.{name}")
+        if t is None or not torch.isfinite(t).all():
+            raise ValueError(f"{src}: member 'summary.pt' entry 'whitening.{name}' is missing or not finite")
+        arrays[name] = t.double().numpy()
+    cfg = meta["net"]
+    if arrays["basis"].shape != (cfg["n_components"], cfg["n_offsets"]) or arrays["centre"].shape != (cfg["n_offsets"],):
+        raise ValueError(f"{src}: member 'summary.pt': the whitening's shape does not fit meta.json field 'summary.net'")
+    if meta["cov_net"]["n_components"] != cfg["n_components"] or meta["cov_net"]["n_offsets"] != cfg["n_offsets"]:
+        raise ValueError(f"{src}: meta.json fields 'summary.net' and 'summary.cov_net' disagree on the summary's size")
+    return SummaryModel(class_name, acquisition, radar, label_free, Whitening(**arrays), nets["net"], nets["cov_net"],
+                        float(meta["error_scale"]), float(meta["error_floor"]), float(meta["inflation"]))

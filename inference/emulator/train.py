@@ -10,7 +10,7 @@ split, by a seeded permutation, into a training share and two held-out shares:
 2. held-out A: the emulator's own error, W(u) alpha + beta I, by maximum likelihood
    of its residuals (the M-measurement means; their noise W / M is part of the model);
 3. held-out B: the inflation c >= 1: the median chi-square of the truth's residual for
-   ``n_calibration``-measurement subsets over its expected median (the model's
+   ``n_calibration``-measurement subsets (at most the drones' M) over its expected median (the model's
    covariance scaled until the truth sits where a chi-square says it should).
 
 Nothing here sees the drones an SBC or a study tests on.
@@ -60,13 +60,16 @@ def train_summary_model(x: np.ndarray, profiles: np.ndarray, label_free: LabelFr
     x = np.asarray(x, float)
     profiles = np.asarray(profiles)
     n, m = profiles.shape[:2]
-    if m < max(2, config.n_calibration):
-        raise ValueError(f"need at least {max(2, config.n_calibration)} measurements per drone, got {m}")
+    if m < 2:
+        raise ValueError(f"need at least 2 measurements per drone (the within-drone covariance), got {m}")
     s = folded_log_profile(profiles, config.n_offsets)  # (N, M, F)
     u = label_free.to_unbounded(label_free.quantities(x))
     sk = sketch(label_free.from_unbounded(u), label_free.E, config.n_offsets, radar)
     perm = np.random.default_rng(seed).permutation(n)
-    n_out = max(100, int(round(config.held_out * n)))
+    n_out = max(2, int(round(config.held_out * n)))
+    if n - 2 * n_out < 10:
+        raise ValueError(f"too few drones to train the summary likelihood: {n} (needs 10 to train on after two "
+                         f"held-out shares of {config.held_out:g})")
     held_a, held_b, train = perm[:n_out], perm[n_out: 2 * n_out], perm[2 * n_out:]
     wh = Whitening.fit(s[train], config.n_components)
     z_all = wh(s)  # (N, M, D)
@@ -83,7 +86,7 @@ def train_summary_model(x: np.ndarray, profiles: np.ndarray, label_free: LabelFr
     alpha, beta = _error_model(model, u[held_a], z[held_a], m)
     model.error_scale, model.error_floor = alpha, beta
     log(f"emulator error: alpha {alpha:.4f} x W(u) + beta {beta:.4f} x I")
-    k = config.n_calibration
+    k = min(config.n_calibration, m)  # the drones' measurements bound the subsets
     chi = residual_chi2(model, u[held_b], z_all[held_b][:, :k].mean(1), k)
     from scipy.stats import chi2
 

@@ -83,11 +83,23 @@ def amortized_report(res, identified_ratio: float) -> str:
                  "its draws inside the prior")
     if "emcee" in d:
         m = d["emcee"]
-        lines.append(f"emcee on the learned likelihood: {m['n_walkers']} walkers x {m['steps']} steps "
+        which = {"summary": "the summary likelihood", "ratio": "the learned likelihood ratio"}.get(
+            m.get("likelihood", "ratio"), "the learned likelihood")
+        role = "the route used" if d["route"] == "emcee" else "run as a check"
+        lines.append(f"nlopt + emcee on {which} ({role}): {m['n_walkers']} walkers x {m['steps']} steps "
                      f"({m['seconds']:.1f} s), max tau {m['tau_max']:.0f} steps, chain/tau {m['steps_over_tau']:.1f}, "
                      f"min ESS {m['ess_min']:.0f}, R-hat max {m['rhat_max']:.3f}, acceptance {m['acceptance_mean']:.2f}: "
                      + (m["reason"] if m["reason"].startswith("NOT CONVERGED") else f"converged ({m['reason']})"))
     lines.append(f"posterior used by the strategies: {d['route']} ({d['reason']})")
+    if d.get("widths"):
+        lines.append("label-free quantities (the lines sorted by frequency; rad/s and m): median, 90% interval, "
+                     "its width / median, and the Cramer-Rao bound's 90% width / median for these measurements")
+        rows = {n: {"median": v["median"], "q05": v["q05"], "q95": v["q95"],
+                    "width/median": (v["q95"] - v["q05"]) / abs(v["median"]),
+                    "CRB width/median": v.get("crb_width", float("nan")) / abs(v["median"])}
+                for n, v in d["widths"].items()}
+        with pd.option_context("display.width", 140, "display.max_rows", 500):
+            lines.append(pd.DataFrame(rows).T.to_string(float_format=lambda v: f"{v:.4g}"))
     if d.get("out_of_range"):
         lines.append(f"WARNING: {d['out_of_range_why']}")
     table = res.summary()[["mean", "sd", "q05", "q95", "sd_ratio", "identified"]]
