@@ -102,7 +102,7 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
     est.save(out)  # usable now; rewritten with its SBC figures below
     if sbc_truths:
         est.meta["sbc"] = estimator_sbc(est, sbc_truths, seed=child_seed(seed, "sbc"), workers=workers,
-                                        mcmc_truths=sbc_mcmc_truths, mcmc_settings=mcmc_settings,
+                                        mcmc_truths=sbc_mcmc_truths, mcmc_settings=mcmc_settings, estimator_path=out,
                                         progress=progress, log=log)
         est.meta["default_route"] = (est.meta["sbc"].get("route_table") or {}).get("default") or "amortized"
     est.meta["job_seconds"] = time.perf_counter() - t0
@@ -128,9 +128,10 @@ def sbc_data(spec: SimulationSpec, n: int, seed, workers: int = 1):
 
 
 def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, workers: int = 1, mcmc_truths: int = 0,
-                  mcmc_settings=None, progress=None, log=print) -> dict:
+                  mcmc_settings=None, estimator_path=None, progress=None, log=print) -> dict:
     """SBC of the amortized route on n_truths fresh drones (5 measurements each), and
-    of the emcee route on the first ``mcmc_truths`` of them."""
+    the route table of both routes on the first ``mcmc_truths`` of them (in ``workers``
+    processes when ``estimator_path``, the estimator's file, is given)."""
     lf = est.label_free
     vectors, profiles = sbc_data(est.spec, n_truths, seed, workers)
     truths = lf.quantities(vectors)
@@ -155,8 +156,10 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
 
         settings = mcmc_settings or CalibrationSettings(progress=False)
         k = min(mcmc_truths, n_truths)
-        table = route_table({"amortized": amortized, "emcee": emcee_route(est, settings)}, truths[:k], profiles[:k],
-                            lf.names, to_unbounded=lf.to_unbounded, seed=seed, progress=progress)
+        routes = {name: Route(name, est if estimator_path is None else estimator_path, settings)
+                  for name in ("amortized", "emcee")}
+        table = route_table(routes, truths[:k], profiles[:k], lf.names, to_unbounded=lf.to_unbounded, seed=seed,
+                            progress=progress, workers=workers if estimator_path is not None else 1)
         out["emcee"] = table["rows"]["emcee"]
         out["emcee"]["likelihood"] = est.likelihood_name
         out["route_table"] = {"drones": int(k), "default": table["default"],
@@ -167,23 +170,76 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
     return out
 
 
-def emcee_route(est: AmortizedEstimator, settings):
-    """The emcee route as an SBC ``draw``: nlopt + emcee on the file's likelihood, started
-    from the amortized draws (resampled by importance weight when the likelihood is the
-    summary one), as :func:`.amortized.calibrate.calibrate_amortized` runs it."""
-    from .amortized.mcmc import sample
+class Route:
+    """A route of an estimator file as an SBC ``draw(profiles, n, seed) -> (q draws,
+    converged)`` that pickles (the file is read once per process): 'amortized' (exact
+    draws) or 'emcee' (nlopt + emcee on the file's likelihood, started from the
+    amortized draws resampled by importance weight where the likelihood is the summary
+    one, as :func:`.amortized.calibrate.calibrate_amortized` runs it)."""
 
-    lf = est.label_free
+    _cache: dict = {}
 
-    def draw(y, n, s):
+    def __init__(self, name: str, estimator, settings=None):
+        self.name, self.settings = name, settings
+        self.path = None if isinstance(estimator, AmortizedEstimator) else str(estimator)
+        self._est = estimator if isinstance(estimator, AmortizedEstimator) else None
+
+    def __getstate__(self):
+        if self.path is None:
+            raise TypeError("a Route over an estimator in memory does not pickle: give its file's path")
+        return {"name": self.name, "settings": self.settings, "path": self.path, "_est": None}
+
+    @property
+    def est(self) -> AmortizedEstimator:
+        if self._est is None:
+            if self.path not in Route._cache:
+                Route._cache[self.path] = AmortizedEstimator.load(self.path)
+            self._est = Route._cache[self.path]
+        return self._est
+
+    def __call__(self, y, n, s):
+        from .amortized.mcmc import sample
+
+        est, lf = self.est, self.est.label_free
+        if self.name == "amortized":
+            u, _ = est.sample_u(y, n, s, strict=False)
+            return lf.from_unbounded(u), True
         u, _ = est.sample_u(y, 1000, s, strict=False)
         log_q = est.log_prob_u(u, y) if est.summary is not None else None
-        run, _ = sample(est.target(y), u, settings, s, log_q=log_q)
+        run, _ = sample(est.target(y), u, self.settings, s, log_q=log_q)
         draws = run.draws()
         pick = np.linspace(0, len(draws) - 1, n).round().astype(int)
         return lf.from_unbounded(draws[pick]), run.converged
 
-    return draw
+
+def specimen_table(est: AmortizedEstimator, n: int, *, settings=None, seed: int = 0, workers: int = 1,
+                   estimator_path=None, progress=None) -> dict:
+    """Both routes on n drones drawn as the study draws new drones (the specimen model
+    around the class reference, 5 measurements each): where users' drones are, not
+    the prior's. Rows as the route table's (their 'outer share' and coverage are not
+    SBC: the truths are not prior draws), plus the Cramer-Rao bound's median 90% width
+    / truth per quantity where the file has a summary likelihood."""
+    from .diagnostics.routes import run
+    from .settings import CalibrationSettings
+
+    settings = settings or CalibrationSettings(progress=False)
+    lf = est.label_free
+    vectors, profiles = sbc_data(replace(est.spec, near_width=1.0), n, seed, workers)
+    truths = lf.quantities(vectors)
+    rows = {}
+    for name in ("amortized", "emcee"):
+        route = Route(name, est if estimator_path is None else estimator_path, settings)
+        rows[name] = _row(run(route, truths, profiles, lf.names, seed=seed, to_unbounded=lf.to_unbounded,
+                              progress=progress, desc=f"specimens {name}",
+                              workers=workers if estimator_path is not None else 1))
+    out = {"drones": int(n), "near_width": 1.0, "rows": rows}
+    if est.summary is not None:
+        from .emulator.posterior import EmulatedPosterior
+
+        u = lf.to_unbounded(truths)
+        crb = np.array([2 * 1.645 * EmulatedPosterior(est.summary, y).crb_quantities(t) for y, t in zip(profiles, u)])
+        out["crb_width_over_truth"] = dict(zip(lf.names, map(float, np.median(crb / np.abs(truths), axis=0))))
+    return out
 
 
 def _row(summary: dict) -> dict:

@@ -484,7 +484,8 @@ def test_the_summary_likelihood_round_trips_through_the_estimator_file(tiny):
     np.testing.assert_allclose(c2, c1, rtol=1e-6, atol=1e-6)
     assert c1.shape == (4, 4, 4) and np.all(np.linalg.eigvalsh(c1) > 0)
     meta = back.meta["summary"]
-    assert meta["inflation"] >= 1 and meta["error_scale"] >= 0 and meta["training"]["near_simulations"] == 60
+    assert meta["inflation"] >= 1 and meta["training"]["near_simulations"] == 60
+    assert meta["error_net"] == {"dim": est.label_free.dim, "hidden": 32}
 
 
 def _rewrite(path, tmp_path, name, change):
@@ -503,8 +504,9 @@ def _rewrite(path, tmp_path, name, change):
 @pytest.mark.parametrize("name, change, text", [
     ("nosum.zip", lambda m, meta: m.pop("summary.pt"), "member 'summary.pt' is missing"),
     ("nometa.zip", lambda m, meta: meta.pop("summary"), "field 'summary' is missing"),
-    ("infl.zip", lambda m, meta: meta["summary"].__setitem__("inflation", 0.5), "'summary.inflation' must be >= 1"),
-    ("nan.zip", lambda m, meta: meta["summary"].__setitem__("error_scale", float("nan")), "'summary.error_scale'"),
+    ("infl.zip", lambda m, meta: meta["summary"].__setitem__("inflation", 0.5), "'summary.inflation' must be a finite"),
+    ("nan.zip", lambda m, meta: meta["summary"].__setitem__("inflation", float("nan")), "'summary.inflation'"),
+    ("err.zip", lambda m, meta: meta["summary"].__setitem__("error_net", {"dim": 8}), "'summary.error_net' must hold"),
     ("dim.zip", lambda m, meta: meta["summary"]["net"].__setitem__("dim", 9), "'summary.net.dim' is 9"),
     ("route.zip", lambda m, meta: meta.__setitem__("default_route", "fast"), "field 'default_route' is 'fast'"),
     ("weights.zip", lambda m, meta: m.__setitem__("summary.pt", m["ratio.pt"]), "member 'summary.pt'"),
@@ -530,3 +532,21 @@ def test_emcee_route_on_the_summary_likelihood_reports_its_likelihood_and_bound(
     assert all(v > 0 for v in d["emcee"]["crb"].values())
     assert "other_route" not in res.idata.groups()  # the amortized route ran only to start the walkers
     assert "summary likelihood" in res.meta["likelihood"]["likelihood"]
+
+
+def test_routes_over_a_file_pickle_and_run_in_workers_as_in_one_process(tiny):
+    import pickle
+
+    from mdaug.inference.diagnostics.routes import run
+    from mdaug.inference.estimator_job import Route
+
+    est, path = tiny
+    with pytest.raises(TypeError, match="give its file's path"):
+        pickle.dumps(Route("amortized", est))
+    route = pickle.loads(pickle.dumps(Route("amortized", path)))
+    lf = est.label_free
+    x, y = simulate(est.spec, 3, 8)
+    truths = lf.quantities(x)
+    one = run(route, truths, y, lf.names, n_rank=19, seed=4)
+    two = run(Route("amortized", path), truths, y, lf.names, n_rank=19, seed=4, workers=2)
+    assert one["ranks"] == two["ranks"]  # drone i's draws depend on seed + i only

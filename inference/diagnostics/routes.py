@@ -21,22 +21,42 @@ from .yardsticks import log_score
 LEVELS = (0.5, 0.6, 0.7, 0.8, 0.9, 0.95)
 
 
+def _timed(draw, y, n, seed):
+    t0 = time.perf_counter()
+    dq, converged = draw(y, n, seed)
+    return dq, bool(converged), time.perf_counter() - t0
+
+
 def run(draw, truths_q: np.ndarray, data, names: list[str], *, n_rank: int = 199, prior_q: np.ndarray | None = None,
-        seed: int = 0, to_unbounded=None, progress=None, desc: str = "SBC") -> dict:
+        seed: int = 0, to_unbounded=None, progress=None, desc: str = "SBC", workers: int = 1) -> dict:
     """SBC of ``draw`` (module doc) over truths_q (R, d) and their data (R profile
     sets). prior_q: prior draws (n, d) for the prior's widths; to_unbounded: map of q
-    for TARP (z-scored there). Returns the summary (plain floats and lists)."""
+    for TARP (z-scored there); workers: processes (``draw`` must then pickle, e.g.
+    :class:`mdaug.inference.estimator_job.Route`). Returns the summary (plain floats
+    and lists); drone i's draws depend only on ``seed + i``, whatever the workers."""
     from ...radar.progress import progress_bar
 
     recs, samples = [], []
     bar = progress_bar(total=len(truths_q), desc=desc, unit="drone", progress=progress)
-    for i, (q, y) in enumerate(zip(truths_q, data)):
-        t0 = time.perf_counter()
-        dq, converged = draw(y, n_rank, seed + i)
+    jobs = [(draw, y, n_rank, seed + i) for i, y in enumerate(data)]
+    if workers > 1 and len(jobs) > 1:
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(min(workers, len(jobs))) as pool:
+            done = pool.map(_timed, *zip(*jobs))
+            results = []
+            for r in done:
+                results.append(r)
+                bar.update(1)
+    else:
+        results = []
+        for job in jobs:
+            results.append(_timed(*job))
+            bar.update(1)
+    for i, (q, (dq, converged, seconds)) in enumerate(zip(truths_q, results)):
         recs.append({"i": i, "ranks": np.sum(dq < q, axis=0).tolist(), "names": names,
-                     "converged": bool(converged), "seconds": time.perf_counter() - t0})
+                     "converged": converged, "seconds": seconds})
         samples.append(dq)
-        bar.update(1)
     bar.close()
     out = summarise(recs, n_rank)
     s = np.stack(samples, axis=1)  # (n_rank, R, d)

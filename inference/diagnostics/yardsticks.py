@@ -60,7 +60,7 @@ def verdict(summary: dict) -> str:
 
 
 def route_table(routes: dict, truths_q: np.ndarray, data, names: list[str], *, to_unbounded, n_rank: int = 199,
-                seed: int = 0, progress=None) -> dict:
+                seed: int = 0, progress=None, workers: int = 1) -> dict:
     """Every route (name -> draw(profiles, n, seed) -> (q draws (n, d), converged)) on
     the same drones; returns {"rows": {name: summary}, "default": name or None}: the
     best (lowest) log score among the routes that pass the gate (None when none does)."""
@@ -69,7 +69,7 @@ def route_table(routes: dict, truths_q: np.ndarray, data, names: list[str], *, t
     rows = {}
     for name, draw in routes.items():
         rows[name] = run(draw, truths_q, data, names, n_rank=n_rank, seed=seed, to_unbounded=to_unbounded,
-                         progress=progress, desc=f"SBC {name}")
+                         progress=progress, desc=f"SBC {name}", workers=workers)
         rows[name]["verdict"] = verdict(rows[name])
     passing = [n for n, r in rows.items() if honest(r)]
     default = min(passing, key=lambda n: rows[n]["log_score"]) if passing else None

@@ -4,14 +4,15 @@
 the emulator network and the covariance of the emulator's own held-out error, for one
 acquisition and radar. For a drone with label-free coordinates u and n measurements:
 
-    z_bar | u ~ N(mu(u), c (W(u) (1 / n + alpha) + beta I))
+    z_bar | u ~ N(mu(u), c (W(u) (1 / n + a(u)) + b(u) I))
 
 z_bar the whitened mean folded log-profile of the n measurements, mu the emulator,
 W(u) the drone's own within-drone covariance of one measurement (a network; the
-pooled one is the identity after whitening), W(u) alpha + beta I the emulator's own
-error (alpha, beta >= 0 fitted by maximum likelihood to its residuals on held-out
-simulated drones, net of the noise in its targets), c >= 1 an inflation chosen on
-other held-out drones so that the chi-square of the truth's residual has its
+pooled one is the identity after whitening), a(u) W(u) + b(u) I the emulator's own
+error (a small network :class:`.net.ErrorNet` fitted by maximum likelihood to the
+emulator's residuals on held-out simulated drones, net of the noise in its targets:
+the emulator is worse where training drones were sparse), c >= 1 an inflation chosen
+on other held-out drones so that the chi-square of the truth's residual has its
 expected median (stated in the file: ``inflation``).
 """
 from __future__ import annotations
@@ -24,7 +25,7 @@ import torch
 from ...generator.acquisition import Acquisition
 from ...radar import RadarConfig
 from ..amortized.target import LabelFree
-from .net import CovarianceNet, Emulator
+from .net import CovarianceNet, Emulator, ErrorNet
 from .sketch import sketch
 from .summary import Whitening
 
@@ -40,8 +41,7 @@ class SummaryModel:
     whitening: Whitening
     net: Emulator
     cov_net: CovarianceNet
-    error_scale: float = 0.0
-    error_floor: float = 0.0
+    error_net: ErrorNet
     inflation: float = 1.0
 
     @property
@@ -58,13 +58,17 @@ class SummaryModel:
         return sketch(q, self.label_free.E, self.whitening.n_offsets, self.radar)
 
     def _nets(self, u: np.ndarray, covariance: bool):
+        """(mu (n, D), Cholesky factor of W (n, D, D) or None, (a, b) (n, 2) or None)."""
         u = np.atleast_2d(np.asarray(u, float))
         tu = torch.as_tensor(u, dtype=torch.float32)
         ts = torch.as_tensor(self.features(u), dtype=torch.float32)
         with torch.no_grad():
             mean = self.net(tu, ts).double().numpy()
-            chol = self.cov_net(tu, ts).double().numpy() if covariance else None
-        return mean, chol
+            if not covariance:
+                return mean, None, None
+            chol = self.cov_net(tu, ts).double().numpy()
+            ab = torch.exp(self.error_net(tu)).double().numpy()
+        return mean, chol, ab
 
     def mean(self, u: np.ndarray) -> np.ndarray:
         """mu(u): (n, D) expected whitened summary of drones u (n, d)."""
@@ -77,13 +81,13 @@ class SummaryModel:
 
     def moments(self, u: np.ndarray, n_measurements: int) -> tuple[np.ndarray, np.ndarray]:
         """(mu (N, D), covariance (N, D, D)) of the whitened mean of n measurements of drones u (N, d)."""
-        mean, chol = self._nets(u, True)
-        return mean, self.covariance_from(chol @ np.swapaxes(chol, -1, -2), n_measurements)
+        mean, chol, ab = self._nets(u, True)
+        return mean, self.covariance_from(chol @ np.swapaxes(chol, -1, -2), ab, n_measurements)
 
-    def covariance_from(self, within: np.ndarray, n_measurements: int) -> np.ndarray:
-        """c (W (1 / n + alpha) + beta I) (module doc) from W (..., D, D)."""
+    def covariance_from(self, within: np.ndarray, ab: np.ndarray, n_measurements: int) -> np.ndarray:
+        """c (W (1 / n + a) + b I) (module doc) from W (N, D, D) and (a, b) (N, 2)."""
         eye = np.eye(within.shape[-1])
-        return self.inflation * (within * (1.0 / int(n_measurements) + self.error_scale) + self.error_floor * eye)
+        return self.inflation * (within * (1.0 / int(n_measurements) + ab[:, :1, None]) + ab[:, 1:, None] * eye)
 
     def summarise(self, profiles: np.ndarray) -> np.ndarray:
         """(D,) whitened mean folded log-profile of measurements (M, L)."""
@@ -141,11 +145,11 @@ def to_parts(model: SummaryModel, report: dict | None = None) -> tuple[dict, dic
     with ``torch.load(weights_only=True)``."""
     state = {f"net.{k}": v.detach().cpu() for k, v in model.net.state_dict().items()}
     state.update({f"cov.{k}": v.detach().cpu() for k, v in model.cov_net.state_dict().items()})
+    state.update({f"error.{k}": v.detach().cpu().float() for k, v in model.error_net.state_dict().items()})
     for name in ("centre", "basis", "between"):
         state[f"whitening.{name}"] = torch.as_tensor(np.asarray(getattr(model.whitening, name), np.float64))
     meta = {"format": SUMMARY_FORMAT, "net": model.net.config(), "cov_net": model.cov_net.config(),
-            "error_scale": float(model.error_scale), "error_floor": float(model.error_floor),
-            "inflation": float(model.inflation), "training": dict(report or {})}
+            "error_net": model.error_net.config(), "inflation": float(model.inflation), "training": dict(report or {})}
     return meta, state
 
 
@@ -156,16 +160,14 @@ def from_parts(meta: dict, state: dict, class_name: str, acquisition: Acquisitio
     if not isinstance(meta, dict) or meta.get("format") != SUMMARY_FORMAT:
         got = meta.get("format") if isinstance(meta, dict) else meta
         raise ValueError(f"{src}: meta.json field 'summary.format' is {got!r}; expected {SUMMARY_FORMAT!r}")
-    for key in ("error_scale", "error_floor", "inflation"):
-        v = meta.get(key)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
-            raise ValueError(f"{src}: meta.json field 'summary.{key}' must be a finite number >= 0, got {v!r}")
-    if meta["inflation"] < 1:
-        raise ValueError(f"{src}: meta.json field 'summary.inflation' must be >= 1, got {meta['inflation']!r}")
+    v = meta.get("inflation")
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 1:
+        raise ValueError(f"{src}: meta.json field 'summary.inflation' must be a finite number >= 1, got {v!r}")
     nets = {}
-    for key, cls_, prefix in (("net", Emulator, "net."), ("cov_net", CovarianceNet, "cov.")):
+    for key, cls_, prefix in (("net", Emulator, "net."), ("cov_net", CovarianceNet, "cov."),
+                              ("error_net", ErrorNet, "error.")):
         cfg = meta.get(key)
-        want = ("dim", "n_offsets", "n_components", "hidden", "depth")
+        want = ("dim", "hidden") if key == "error_net" else ("dim", "n_offsets", "n_components", "hidden", "depth")
         if not isinstance(cfg, dict) or sorted(cfg) != sorted(want) or not all(
                 isinstance(cfg[k], int) and not isinstance(cfg[k], bool) and 1 <= cfg[k] <= 4096 for k in want):
             raise ValueError(f"{src}: meta.json field 'summary.{key}' must hold the integers {', '.join(want)}")
@@ -194,4 +196,4 @@ def from_parts(meta: dict, state: dict, class_name: str, acquisition: Acquisitio
     if meta["cov_net"]["n_components"] != cfg["n_components"] or meta["cov_net"]["n_offsets"] != cfg["n_offsets"]:
         raise ValueError(f"{src}: meta.json fields 'summary.net' and 'summary.cov_net' disagree on the summary's size")
     return SummaryModel(class_name, acquisition, radar, label_free, Whitening(**arrays), nets["net"], nets["cov_net"],
-                        float(meta["error_scale"]), float(meta["error_floor"]), float(meta["inflation"]))
+                        nets["error_net"], float(meta["inflation"]))

@@ -175,3 +175,75 @@ def fit_covariance(net: CovarianceNet, u: np.ndarray, sk: np.ndarray, z: np.ndar
     net.load_state_dict(best_state)
     net.eval()
     return {"val_nll": hist, "best_epoch": int(np.argmin(hist)), "best_val": best}
+
+
+class ErrorNet(nn.Module):
+    """u (n, d) -> (log a, log b) (n, 2): the emulator's own error covariance at u is
+    a W(u) + b I (W the within-drone covariance). The emulator is good where the
+    training drones were dense and poor where they were sparse, so its error follows
+    the drone; the last layer starts at (log alpha0, log beta0), the pooled fit."""
+
+    def __init__(self, dim: int, hidden: int = 32):
+        super().__init__()
+        self.dim, self.hidden = int(dim), int(hidden)
+        self.register_buffer("in_mean", torch.zeros(dim))
+        self.register_buffer("in_sd", torch.ones(dim))
+        self.mlp = nn.Sequential(nn.Linear(dim, hidden), nn.SiLU(), nn.Linear(hidden, hidden), nn.SiLU(),
+                                 nn.Linear(hidden, 2))
+
+    def config(self) -> dict:
+        return {"dim": self.dim, "hidden": self.hidden}
+
+    def forward(self, u: torch.Tensor) -> torch.Tensor:
+        return self.mlp((u - self.in_mean) / self.in_sd).clamp(-20.0, 5.0)
+
+
+def fit_error(net: ErrorNet, u: np.ndarray, within: np.ndarray, resid: np.ndarray, m: int, *, start: tuple,
+              seed: int, epochs: int = 400, lr: float = 3e-3, patience: int = 40, val_share: float = 0.25,
+              weight_decay: float = 1e-3) -> dict:
+    """Train ``net`` on held-out drones: resid (n, D) = the M-measurement mean summary
+    minus the emulator, Gaussian with covariance W / m + a(u) W + b(u) I (maximum
+    likelihood, full batch, early stopping on a seeded split). start: (alpha0, beta0)."""
+    g = torch.Generator().manual_seed(int(seed))
+    n = len(u)
+    perm = torch.randperm(n, generator=g)
+    n_val = max(1, int(round(val_share * n)))
+    tr, va = perm[n_val:], perm[:n_val]
+    U = torch.as_tensor(u, dtype=torch.float64)
+    W = torch.as_tensor(within, dtype=torch.float64)
+    R = torch.as_tensor(resid, dtype=torch.float64)
+    net.double()
+    net.in_mean.copy_(U[tr].mean(0))
+    net.in_sd.copy_(U[tr].std(0).clamp_min(1e-6))
+    with torch.no_grad():
+        net.mlp[-1].weight.zero_()
+        net.mlp[-1].bias.copy_(torch.log(torch.as_tensor(start, dtype=torch.float64).clamp_min(1e-8)))
+    eye = torch.eye(W.shape[-1], dtype=torch.float64)
+
+    def nll(idx):
+        ab = torch.exp(net(U[idx]))
+        cov = W[idx] * (1.0 / m + ab[:, :1, None]) + ab[:, 1:, None] * eye
+        chol = torch.linalg.cholesky(cov)
+        y = torch.linalg.solve_triangular(chol, R[idx][..., None], upper=False)[..., 0]
+        return (torch.log(torch.diagonal(chol, dim1=1, dim2=2)).sum(1) + 0.5 * (y * y).sum(1)).mean()
+
+    opt = torch.optim.Adam(net.parameters(), lr=lr, weight_decay=weight_decay)
+    best, best_state, hist, since = np.inf, None, [], 0
+    for _ in range(epochs):
+        loss = nll(tr)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        with torch.no_grad():
+            v = float(nll(va))
+        hist.append(v)
+        if v < best - 1e-5:
+            best, since = v, 0
+            best_state = {k: t.clone() for k, t in net.state_dict().items()}
+        else:
+            since += 1
+            if since >= patience:
+                break
+    net.load_state_dict(best_state)
+    net.float().eval()
+    return {"val_nll": hist, "best_epoch": int(np.argmin(hist)), "best_val": best}

@@ -7,8 +7,9 @@ split, by a seeded permutation, into a training share and two held-out shares:
 1. training: the whitening (:class:`.summary.Whitening`), the emulator of the mean
    (:class:`.net.Emulator`) on each drone's mean summary, and the within-drone
    covariance network (:class:`.net.CovarianceNet`) on the deviations from it;
-2. held-out A: the emulator's own error, W(u) alpha + beta I, by maximum likelihood
-   of its residuals (the M-measurement means; their noise W / M is part of the model);
+2. held-out A: the emulator's own error, a(u) W(u) + b(u) I (:class:`.net.ErrorNet`,
+   started from the pooled constants a, b), by maximum likelihood of its residuals
+   (the M-measurement means; their noise W / M is part of the model);
 3. held-out B: the inflation c >= 1: the median chi-square of the truth's residual for
    ``n_calibration``-measurement subsets (at most the drones' M) over its expected median (the model's
    covariance scaled until the truth sits where a chi-square says it should).
@@ -26,7 +27,7 @@ from ...generator.acquisition import Acquisition
 from ...radar import RadarConfig
 from ..amortized.target import LabelFree
 from .model import SummaryModel
-from .net import CovarianceNet, Emulator, fit, fit_covariance
+from .net import CovarianceNet, Emulator, ErrorNet, fit, fit_covariance, fit_error
 from .sketch import sketch
 from .summary import Whitening, folded_log_profile
 
@@ -82,10 +83,16 @@ def train_summary_model(x: np.ndarray, profiles: np.ndarray, label_free: LabelFr
     cov_net = CovarianceNet(label_free.dim, config.n_offsets, config.n_components, config.cov_hidden)
     chist = fit_covariance(cov_net, u[train], sk[train], z_all[train], seed=seed, epochs=config.cov_epochs)
     log(f"within-drone covariance: best epoch {chist['best_epoch']}, validation nll {chist['best_val']:.4f}")
-    model = SummaryModel(class_name, acquisition, radar, label_free, wh, net, cov_net)
+    error_net = ErrorNet(label_free.dim)
+    model = SummaryModel(class_name, acquisition, radar, label_free, wh, net, cov_net, error_net)
     alpha, beta = _error_model(model, u[held_a], z[held_a], m)
-    model.error_scale, model.error_floor = alpha, beta
-    log(f"emulator error: alpha {alpha:.4f} x W(u) + beta {beta:.4f} x I")
+    mean_a, chol_a, _ = model._nets(u[held_a], True)
+    ehist = fit_error(error_net, u[held_a], chol_a @ np.swapaxes(chol_a, -1, -2), z[held_a] - mean_a, m,
+                      start=(alpha, beta), seed=seed)
+    ab = model._nets(u[held_a], True)[2]
+    log(f"emulator error: pooled a {alpha:.4f}, b {beta:.4f}; per drone a {np.median(ab[:, 0]):.4f} "
+        f"({np.quantile(ab[:, 0], 0.1):.4f}-{np.quantile(ab[:, 0], 0.9):.4f}), b {np.median(ab[:, 1]):.4f} "
+        f"({np.quantile(ab[:, 1], 0.1):.4f}-{np.quantile(ab[:, 1], 0.9):.4f}), best epoch {ehist['best_epoch']}")
     k = min(config.n_calibration, m)  # the drones' measurements bound the subsets
     chi = residual_chi2(model, u[held_b], z_all[held_b][:, :k].mean(1), k)
     from scipy.stats import chi2
@@ -96,7 +103,7 @@ def train_summary_model(x: np.ndarray, profiles: np.ndarray, label_free: LabelFr
     report = {"config": config.to_dict(), "n_drones": int(n), "n_train": int(len(train)),
               "emulator_best_epoch": hist["best_epoch"], "emulator_val_mse": float(hist["best_val"]),
               "covariance_best_epoch": chist["best_epoch"], "covariance_val_nll": float(chist["best_val"]),
-              "error_scale": alpha, "error_floor": beta, "chi2_median_ratio": ratio,
+              "error_pooled": [alpha, beta], "error_best_epoch": ehist["best_epoch"], "chi2_median_ratio": ratio,
               "chi2_q90_ratio": float(np.quantile(chi, 0.9) / chi2.ppf(0.9, config.n_components)),
               "inflation": model.inflation, "seed": int(seed)}
     return model, report
@@ -113,7 +120,7 @@ def _error_model(model: SummaryModel, u: np.ndarray, z_bar: np.ndarray, m: int) 
     """alpha, beta >= 0 maximising sum_i log N(z_bar_i - mu(u_i); 0, W_i (1 / m + alpha) + beta I)."""
     from scipy.optimize import minimize
 
-    mean, chol = model._nets(u, True)
+    mean, chol, _ = model._nets(u, True)
     w = chol @ np.swapaxes(chol, -1, -2)
     r = z_bar - mean
     eye = np.eye(w.shape[-1])

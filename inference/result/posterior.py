@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ...generator import IDX, N_PARAMS, PARAM_NAMES
-from ...generator.model import circular_stats, wrap_phase
+from ...generator.model import circular_stats
 from ..space.priors import PHASE_NAMES, SHARED, Priors, engine_lines
 
 FORMAT = "mdaug-posterior-2"
@@ -241,15 +241,14 @@ class CalibrationResult:
         return x.reshape(n, e * N_PARAMS)
 
     # ---- summaries -------------------------------------------------------------------
-    def lines(self) -> np.ndarray:
+    def lines(self, by_brightness: bool = False) -> np.ndarray:
         """Label-free view of the posterior (n_draws, E, 4, 2): every engine's four
         vibration lines as (frequency rad/s, amplitude m), sorted by frequency.
         Which line is the roll, the pitch or a mixing term is a labelling the data
         cannot fix (:mod:`..space.priors`); the lines themselves are what one profile
-        identifies."""
-        w, a, _ = engine_lines(self.draws().reshape(self.n_draws, self.n_engines, N_PARAMS))
-        order = np.argsort(w, axis=-1)
-        return np.stack([np.take_along_axis(w, order, -1), np.take_along_axis(a, order, -1)], axis=-1)
+        identifies. ``by_brightness``: engines in each draw's brightness order (see
+        :func:`label_free_lines`) instead of their stored order."""
+        return label_free_lines(self.draws().reshape(self.n_draws, self.n_engines, N_PARAMS), by_brightness)
 
     def summary(self):
         """pandas DataFrame, one row per parameter: mean, sd, q05, q95 (90% interval),
@@ -300,26 +299,11 @@ class CalibrationResult:
         return (amortized_report if self.amortized else report)(self, IDENTIFIED_RATIO)
 
     # ---- plots (:mod:`.plots`) ------------------------------------------------------
-    def plot_matrix(self):
-        """(draws x columns, names): the sampled parameters in stored units, phases of
-        measurement 0 unwrapped around their circular mean."""
-        cols, names = [], []
-        for k in range(self.n_engines):
-            for name in SHARED + (("Gamma",) if k else ()):
-                cols.append(self._var(name)[:, k])
-                names.append(f"{name}[{k}]")
-            for name in (PHASE_NAMES if not self.marginal else ()):
-                v = self._var(name)[:, 0, k]
-                mu = circular_stats(v)["mean"]
-                cols.append(wrap_phase(v - mu) + mu)  # unwrapped around the circular mean
-                names.append(f"{name}[{k}]")
-        return np.column_stack(cols), names
-
-    def plot_corner(self, path, max_params: int = 24):
+    def plot_corner(self, path, engines: str = "brightest", truths=None):
         """The corner plot (:func:`.plots.plot_corner`)."""
         from .plots import plot_corner
 
-        return plot_corner(self, path, max_params)
+        return plot_corner(self, path, engines=engines, truths=truths)
 
     def plot_trace(self, path):
         """The trace plot (:func:`.plots.plot_trace`)."""
@@ -366,3 +350,19 @@ class CalibrationResult:
         if n_engines is not None and res.n_engines != int(n_engines):
             raise DataFileError(f"{path}: posterior has {res.n_engines} engine(s), expected {n_engines}")
         return res
+
+
+def label_free_lines(xe: np.ndarray, by_brightness: bool = False) -> np.ndarray:
+    """Engine vectors xe (n, E, 13) -> their lines (n, E, 4, 2): (frequency rad/s,
+    amplitude m) sorted by frequency; ``by_brightness``: engines ordered by Gamma
+    decreasing in each row (the engine order of the amortized estimator's label-free
+    quantities, :func:`mdaug.inference.amortized.target.brightness_order`), so engine 0
+    is the brightest, the one the measurements identify."""
+    xe = np.asarray(xe, float)
+    w, a, _ = engine_lines(xe)
+    order = np.argsort(w, axis=-1)
+    out = np.stack([np.take_along_axis(w, order, -1), np.take_along_axis(a, order, -1)], axis=-1)
+    if by_brightness:
+        eng = np.argsort(-xe[..., IDX["Gamma"]], axis=1, kind="stable")
+        out = np.take_along_axis(out, eng[..., None, None], 1)
+    return out

@@ -1,8 +1,10 @@
-"""The calibration's text report: fit, sampler, convergence and the posterior summary
-table with units (:meth:`~.posterior.CalibrationResult.report` calls :func:`report`)."""
+"""The calibration's text report: fit, sampler, the status (:mod:`.status`: route,
+convergence, SBC, out of range) and the posterior summary table with units (:meth:`~.posterior.CalibrationResult.report` calls :func:`report`)."""
 from __future__ import annotations
 
 import numpy as np
+
+from .status import calibration_status, chain_words
 
 SUMMARY_UNITS = {"Gamma": "rel.", "A": "m", "w": "rad/s", "C": "ratio", "phi": "rad", "offset": "bins",
                  "carrier": "x sum Gamma", "noise_db": "dB", "sigma": "peak = 1"}
@@ -44,7 +46,7 @@ def report(res, identified_ratio: float) -> str:
                      f"max tau {d['tau_max']:.0f} steps, chain/tau {d['steps_over_tau']:.1f}, "
                      f"min ESS {d['ess_min']:.0f}, acceptance {d['acceptance_mean']:.2f}, "
                      f"burn {d['burn']}, thin {d['thin']}")
-    lines.append(("converged: " if res.converged else "WARNING: ") + d["reason"])
+    lines += calibration_status(res).lines()
     if d.get("weak_engines"):
         lines.append(f"WARNING: engine(s) {d['weak_engines']} stay near their prior (too weak to identify)")
     unid = [k for k, v in d["identified"].items() if not v]
@@ -75,10 +77,6 @@ def amortized_report(res, identified_ratio: float) -> str:
              f"acquisition: {res.acquisition.describe()}; every nuisance marginalised by training on the scene "
              "simulator",
              f"estimator: {est['class']} K = {est['ramps']}, {est['simulations']} simulated drones ({est['simulator']})"]
-    for route, s in est.get("sbc", {}).items():
-        lo, hi = s["coverage90_range"]
-        lines.append(f"  its SBC, {route}: outer-10% share {s['outer_share']:.3f} (honest 0.10), 90% coverage "
-                     f"{lo:.2f}-{hi:.2f} over {s['n_replicates']} simulated drones")
     lines.append(f"amortized posterior: {d['amortized_seconds'] * 1e3:.0f} ms, {d['amortized_inside_prior']:.0%} of "
                  "its draws inside the prior")
     if "emcee" in d:
@@ -89,8 +87,9 @@ def amortized_report(res, identified_ratio: float) -> str:
         lines.append(f"nlopt + emcee on {which} ({role}): {m['n_walkers']} walkers x {m['steps']} steps "
                      f"({m['seconds']:.1f} s), max tau {m['tau_max']:.0f} steps, chain/tau {m['steps_over_tau']:.1f}, "
                      f"min ESS {m['ess_min']:.0f}, R-hat max {m['rhat_max']:.3f}, acceptance {m['acceptance_mean']:.2f}: "
-                     + (m["reason"] if m["reason"].startswith("NOT CONVERGED") else f"converged ({m['reason']})"))
-    lines.append(f"posterior used by the strategies: {d['route']} ({d['reason']})")
+                     + "{}: {}".format(*chain_words(m["converged"], m["reason"])))
+    lines.append(f"posterior used by the strategies: {d['route']} route")
+    lines += calibration_status(res).lines()
     if d.get("widths"):
         lines.append("label-free quantities (the lines sorted by frequency; rad/s and m): median, 90% interval, "
                      "its width / median, and the Cramer-Rao bound's 90% width / median for these measurements")
@@ -100,8 +99,6 @@ def amortized_report(res, identified_ratio: float) -> str:
                 for n, v in d["widths"].items()}
         with pd.option_context("display.width", 140, "display.max_rows", 500):
             lines.append(pd.DataFrame(rows).T.to_string(float_format=lambda v: f"{v:.4g}"))
-    if d.get("out_of_range"):
-        lines.append(f"WARNING: {d['out_of_range_why']}")
     table = res.summary()[["mean", "sd", "q05", "q95", "sd_ratio", "identified"]]
     table.insert(0, "unit", [summary_unit(n) for n in table.index])
     with pd.option_context("display.width", 140, "display.max_rows", 500):

@@ -1,0 +1,193 @@
+"""A calibration's status in one vocabulary: :func:`calibration_status` reads a
+:class:`~.posterior.CalibrationResult` (or its diagnostics dict, or a study's record of
+it) and returns :class:`CalibrationStatus`, the facts and the words that the terminal
+report (:mod:`.report`), the corner plot's title (:mod:`.plots`), the study's
+``results.json``, its HTML report and the README's block all print.
+
+The facts and their words:
+
+* **route**: ``amortized`` (the estimator's exact draws), ``emcee`` (nlopt + emcee on
+  the estimator's learned likelihood: its summary likelihood or its likelihood ratio,
+  ``diagnostics['emcee']['likelihood']``) or ``likelihood`` (``--method likelihood``:
+  the closed-form route, sampled by emcee, SMC or a Laplace approximation);
+* **convergence**: ``converged`` or ``NOT converged`` for a chain (emcee, SMC, Laplace);
+  ``exact draws`` for the amortized route, which has no chain;
+* **honesty**, by the one gate of :func:`mdaug.inference.diagnostics.yardsticks.honest`
+  (outer-10% share <= 0.13 and every quantity's 90% coverage >= 0.85) on the SBC stored
+  in the estimator file for the route used: ``honest``, ``overconfident`` or
+  ``no SBC stored`` (the closed-form route stores none). The rank histograms' pooled
+  chi-square p is said beside it in words, never as a second verdict;
+* **out of range**: the measurements unlike the estimator's training set
+  (``diagnostics['out_of_range']``, why in ``['out_of_range_why']``).
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+from ..diagnostics.yardsticks import COVERAGE_MIN, OUTER_MAX, honest, verdict
+
+RANK_P = 0.05
+"""Pooled rank chi-square p below which the rank histograms are called not flat."""
+
+EXACT, CONVERGED, NOT_CONVERGED = "exact draws", "converged", "NOT converged"
+NO_SBC = "no SBC stored"
+"""The honesty word where no SBC is stored (else the gate's own word, :func:`~mdaug.inference.diagnostics.yardsticks.verdict`)."""
+OUT_OF_RANGE = "out of range"
+
+_LIKELIHOODS = {"summary": "the estimator's summary likelihood", "ratio": "the estimator's learned likelihood ratio"}
+_SAMPLERS = {"emcee": "emcee", "smc": "tempered SMC", "laplace": "a Laplace approximation"}
+
+
+@dataclass(frozen=True)
+class CalibrationStatus:
+    """What a calibration is, in facts (``route``, ``converged``, ``sbc``, ...) and in the
+    words every place prints (module doc)."""
+
+    route: str
+    """'amortized', 'emcee' or 'likelihood'."""
+    route_words: str
+    """How the posterior was drawn, e.g. "nlopt + emcee on the estimator's summary likelihood"."""
+    converged: bool
+    """True for exact draws and for a converged chain (the exit status follows it)."""
+    convergence: str
+    """'exact draws', 'converged' or 'NOT converged'."""
+    convergence_detail: str
+    """The sampler's own reason (without a status prefix)."""
+    honesty: str
+    """'honest', 'overconfident' or 'no SBC stored'."""
+    passed: bool | None
+    """The gate's verdict on the stored SBC (None: no SBC stored)."""
+    sbc: dict | None
+    """The stored SBC of the route used (outer_share, coverage90_range, n_replicates, pooled_p)."""
+    rank_note: str
+    """The rank test in words ('' when no p is stored)."""
+    out_of_range: bool
+    out_of_range_why: str
+    check_route: str
+    """The other route when it ran as a check ('emcee'), else ''."""
+    check_convergence: str
+    """Its convergence word ('converged' or 'NOT converged'; '' when it did not run)."""
+    check_detail: str
+    """Its sampler's reason."""
+
+    @property
+    def check(self) -> str:
+        """The route run as a check in words ('' when none ran)."""
+        if not self.check_route:
+            return ""
+        return f"{self.check_route} route, run as a check: {self.check_convergence}"
+
+    @property
+    def headline(self) -> str:
+        """One line: route, convergence, honesty and, when so, out of range:
+        e.g. ``emcee route: NOT converged; SBC: overconfident; out of range``."""
+        text = f"{self.route} route: {self.convergence}; SBC: {self.honesty}"
+        return text + (f"; {OUT_OF_RANGE}" if self.out_of_range else "")
+
+    @property
+    def trusted(self) -> bool:
+        """Usable as it stands: converged (or exact), not overconfident, in range."""
+        return self.converged and self.passed is not False and not self.out_of_range
+
+    @property
+    def sbc_facts(self) -> str:
+        """The stored SBC against the gate's limits, and the rank note ('' without SBC)."""
+        if not self.sbc:
+            return ""
+        s = self.sbc
+        lo, hi = s.get("coverage90_range") or (float("nan"), float("nan"))
+        n = s.get("n_replicates")
+        text = (f"on {n if n is not None else '?'} simulated drones, outer-10% share {s['outer_share']:.3f} (at most "
+                f"{OUTER_MAX:.2f}; 0.10 expected), 90% coverage {lo:.2f}-{hi:.2f} per quantity (at least "
+                f"{COVERAGE_MIN:.2f})")
+        return text + (f"; {self.rank_note}" if self.rank_note else "")
+
+    @property
+    def sbc_words(self) -> str:
+        """The honesty word and the facts behind it in one sentence."""
+        return f"{self.honesty}: {self.sbc_facts}" if self.sbc else f"{NO_SBC} for the {self.route} route"
+
+    def lines(self) -> list[str]:
+        """The status as the terminal report prints it."""
+        out = [f"status: {self.headline}", f"  route: {self.route_words}"]
+        if self.convergence != EXACT:
+            out.append(("  " if self.converged else "  WARNING: ") + self.convergence
+                       + (f": {self.convergence_detail}" if self.convergence_detail else ""))
+        out.append(f"  SBC: {self.sbc_words}")
+        if self.check:
+            out.append(f"  {self.check}" + (f" ({self.check_detail})" if self.check_detail else ""))
+        if self.out_of_range:
+            out.append(f"  WARNING: {OUT_OF_RANGE}: {self.out_of_range_why}")
+        return out
+
+    def to_dict(self) -> dict:
+        """Plain data for ``results.json`` (the headline and SBC sentence included)."""
+        return {**asdict(self), "headline": self.headline, "sbc_words": self.sbc_words, "sbc_facts": self.sbc_facts,
+                "check": self.check,
+                "trusted": self.trusted}
+
+
+def chain_words(converged: bool, reason: str) -> tuple[str, str]:
+    """('converged' or 'NOT converged', the reason without a status prefix)."""
+    return (CONVERGED if converged else NOT_CONVERGED), _strip(reason)
+
+
+def rank_note(p, passed: bool) -> str:
+    """The pooled rank chi-square p in words, beside the gate's verdict ``passed``."""
+    if p is None or p != p:
+        return ""
+    if p >= RANK_P:
+        return f"the rank histograms are flat (p = {_sig(p)})"
+    if passed:
+        return (f"the rank histograms are not flat (p = {_sig(p)}): the shape of the posterior differs from the "
+                "simulator's, though its outer share and coverage pass")
+    return f"the rank histograms are not flat either (p = {_sig(p)})"
+
+
+def calibration_status(source) -> CalibrationStatus:
+    """The status (module doc) of ``source``: a CalibrationResult, its diagnostics dict,
+    or a study's calibration record (a dict holding ``diagnostics``)."""
+    d = getattr(source, "diagnostics", source)
+    if isinstance(d, dict) and isinstance(d.get("diagnostics"), dict):  # a study's record
+        d = {"converged": d.get("converged"), **d["diagnostics"]}
+    if not isinstance(d, dict) or "converged" not in d:
+        raise ValueError("a calibration status needs its diagnostics (with 'converged' and 'reason')")
+    amortized = "estimator" in d or d.get("sampler") == "amortized"  # an estimator's file drew it
+    route = (d.get("route") or ("emcee" if d.get("sampler") == "emcee" else "amortized")) if amortized else "likelihood"
+    check = ("", "", "")
+    if not amortized:
+        sampler = d.get("sampler", "emcee")
+        words = f"the closed-form likelihood, sampled by {_SAMPLERS.get(sampler, sampler)}"
+        convergence, detail = chain_words(bool(d["converged"]), d.get("reason", ""))
+    elif route == "amortized":
+        words = "the amortized posterior: the estimator's exact draws"
+        convergence, detail = EXACT, ""
+        if "emcee" in d:
+            check = ("emcee", *chain_words(bool(d["emcee"].get("converged")), d["emcee"].get("reason", "")))
+    else:
+        m = d.get("emcee", {})
+        words = f"nlopt + emcee on {_LIKELIHOODS.get(m.get('likelihood', 'ratio'), 'the learned likelihood')}"
+        convergence, detail = chain_words(bool(d["converged"]), d.get("reason", ""))
+    sbc = ((d.get("estimator") or {}).get("sbc") or {}).get(route) if amortized else None
+    if sbc and sbc.get("outer_share") is not None and sbc.get("coverage90_range"):
+        passed, honesty = honest(sbc), verdict(sbc)
+        note = rank_note(sbc.get("pooled_p"), passed)
+        sbc = {k: sbc.get(k) for k in ("outer_share", "coverage90_range", "n_replicates", "pooled_p")}
+    else:
+        passed, honesty, note, sbc = None, NO_SBC, "", None
+    return CalibrationStatus(route=route, route_words=words, converged=bool(d["converged"]), convergence=convergence,
+                             convergence_detail=detail, honesty=honesty, passed=passed, sbc=sbc, rank_note=note,
+                             out_of_range=bool(d.get("out_of_range", False)),
+                             out_of_range_why=str(d.get("out_of_range_why") or ""), check_route=check[0],
+                             check_convergence=check[1], check_detail=check[2])
+
+
+def _strip(reason: str) -> str:
+    for prefix in ("NOT CONVERGED: ", "NOT converged: ", "converged: ", "Converged: "):
+        if reason.startswith(prefix):
+            return reason[len(prefix):]
+    return reason
+
+
+def _sig(p: float) -> str:
+    return f"{p:.1e}" if p < 1e-3 else f"{p:.2g}"
