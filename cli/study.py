@@ -69,10 +69,12 @@ def summary(results: dict) -> str:
                          rows, ["<", "<", ">", ">", "<", *(">" for _ in classes)])
     lines = [table, f"* the best strategy on the selection set '{sel}' ({results['selection']['what']})"
              + (" (tied)" if len(best) > 1 else "") + "; mean over each CNN's training runs", ""]
+    from ..inference.result.status import calibration_status
+
     for cls, r in results["calibration"].items():
-        d = r.get("diagnostics", {})
-        state = "converged" if r["converged"] else f"NOT converged ({d.get('reason', 'see the report')})"
-        lines.append(f"calibration {cls}: {state}")
+        st = calibration_status(r)
+        detail = f" ({st.convergence_detail or 'see the report'})" if not st.converged else ""
+        lines.append(f"calibration {cls}: {st.headline}{detail}")
     return "\n".join(lines)
 
 
@@ -170,7 +172,7 @@ def run_study(args) -> int:
     result(summary(results))
     bad = [c for c, r in results["calibration"].items() if not r["converged"]]
     if bad:
-        warn("run", f"calibration of {', '.join(bad)} did not converge (see the report's diagnostics)")
+        warn("run", f"calibration of {', '.join(bad)}: NOT converged (see the report's diagnostics)")
     return 0
 
 

@@ -9,6 +9,7 @@ worse than chance), by strategy.
 """
 from __future__ import annotations
 
+from ..inference.result.status import calibration_status
 from .markup import Html
 from .numbers import decimals, join, signed, spread
 from .verdicts import TIE, comparison, judge
@@ -172,10 +173,11 @@ def context(results: dict, w=Html(), j: dict | None = None) -> str:
             "interval covers the test sample and the training runs (a bootstrap of the test set's drones, where "
             "it says which drone made each acquisition, and then their acquisitions, one run picked at random in "
             "each resample: where one training run scores on a test sample like this one).")
-    bad = [c for c, cal in results["calibration"].items() if not cal["converged"]]
-    if bad:
-        text += (f" {w.warn(f'Calibration of {join(bad)} did not converge')} (its chain is shorter "
-                 "than the convergence rule asks; see Calibration): the posterior-based strategies rest on it.")
+    for c, cal in results["calibration"].items():
+        st = calibration_status(cal)
+        if not st.trusted:
+            text += (f" {w.warn(f'Calibration of {w.esc(c)}: {w.esc(st.headline)}')} (see Calibration): the posterior-based "
+                     "strategies rest on it.")
     for f in j["nuisances"]:
         d, u = f["digits"], f["unit"]
         text += (" " + w.warn(f"{f['class']}: the measured {f['what']} ({f['measured'][0]:.{d}f} to "

@@ -54,12 +54,12 @@ def calibrate_class(job: dict) -> dict:
     ``out/posteriors/<cls>.nc``, the others beside it as ``<cls>.drone-<id>.nc``), then
     the class's population over the drones (``<cls>.population.npz``; from one drone
     its spreads are the stated prior); corner and trace plots of the first drone in
-    ``out/figures/``; returns the stage's summary (plain data)."""
+    ``out/figures/`` (the corner with ``truth``, the drone's true class vector, where
+    the study knows it); returns the stage's summary (plain data)."""
     from pathlib import Path
 
     from ..inference import calibrate
     from ..inference.population.result import calibrate_population
-    from ..inference.space.priors import engine_lines
     from ..radar.seeds import child_seed
     from .style import figure_style
 
@@ -93,21 +93,13 @@ def calibrate_class(job: dict) -> dict:
     pop_path = pop.save(out / "posteriors" / f"{cls}.population.npz")
     corner_png, trace_png = out / "figures" / f"corner_{cls}.png", out / "figures" / f"trace_{cls}.png"
     with figure_style():
-        res.plot_corner(corner_png)
+        res.plot_corner(corner_png, truths=job.get("truth"))
         if amortized:
             trace_png = None  # no chain in the file: the amortized posterior's draws are exact
         else:
             res.plot_trace(trace_png)
-    lines = res.lines()  # (n, E, 4, 2): frequency rad/s, amplitude m
-    w_ref, _, _ = engine_lines(res.priors.centres)
     return {"posterior": str(nc), "corner": str(corner_png), "trace": None if trace_png is None else str(trace_png),
-            "converged": bool(res.converged), "diagnostics": res.diagnostics, "summary": res.summary(),
-            "n_profiles": int(np.sum(drones == ids[0])), "acquisition": res.acquisition.to_dict(),
-            "measured_acquisition": res.measured_acquisition().to_dict(),
-            "lines": {"frequency_q": np.quantile(lines[..., 0], [0.05, 0.5, 0.95], axis=0).tolist(),
-                      "amplitude_q": np.quantile(lines[..., 1], [0.05, 0.5, 0.95], axis=0).tolist(),
-                      "reference_frequency": np.sort(w_ref, axis=-1).tolist()},
-            "sbc": _estimator_sbc(res) if amortized else None,
+            **calibration_record(res), "n_profiles": int(np.sum(drones == ids[0])),
             "population": str(pop_path), "population_report": pop.report(), "population_spreads": pop.summary(),
             "population_assumed": bool(pop.assumed), "population_converged": bool(pop.converged),
             "drones": ids, "drones_converged": [bool(r.converged) for r in results],
@@ -125,12 +117,23 @@ def campaign(job: dict) -> tuple:
     return camp.profiles, camp.labels, camp.specimen
 
 
-def _estimator_sbc(res) -> dict | None:
-    """The SBC the calibration's estimator passed (stored in its file): the amortized
-    route's outer share, pooled rank p and truths."""
-    sbc = res.diagnostics.get("estimator", {}).get("sbc", {}).get("amortized")
-    return None if not sbc else {"outer_share": sbc.get("outer_share"), "pooled_p": sbc.get("pooled_p"),
-                                 "n_replicates": sbc.get("n_replicates")}
+def calibration_record(res) -> dict:
+    """What the study keeps of one calibration result in ``results.json`` (beside its
+    files): convergence, diagnostics, the status in the one vocabulary
+    (:func:`mdaug.inference.result.status.calibration_status`, its stored SBC in it), the
+    summary table, the acquisition and the label-free lines' quantiles."""
+    from ..inference.result.status import calibration_status
+    from ..inference.space.priors import engine_lines
+
+    status = calibration_status(res)
+    lines = res.lines()  # (n, E, 4, 2): frequency rad/s, amplitude m
+    w_ref, _, _ = engine_lines(res.priors.centres)
+    return {"converged": bool(res.converged), "diagnostics": res.diagnostics, "status": status.to_dict(),
+            "summary": res.summary(), "acquisition": res.acquisition.to_dict(),
+            "measured_acquisition": res.measured_acquisition().to_dict(),
+            "lines": {"frequency_q": np.quantile(lines[..., 0], [0.05, 0.5, 0.95], axis=0).tolist(),
+                      "amplitude_q": np.quantile(lines[..., 1], [0.05, 0.5, 0.95], axis=0).tolist(),
+                      "reference_frequency": np.sort(w_ref, axis=-1).tolist()}}
 
 
 @announced(lambda job: job.get("label") or f"{job['model']} (seed {job['seed']})")

@@ -1,4 +1,5 @@
-"""The report's "Calibration" section: per class, convergence, the sampler, SBC, the
+"""The report's "Calibration" section: per class, its status (route, convergence, SBC,
+out of range: :mod:`mdaug.inference.result.status`, the words of every other place), the
 label-free posterior of the vibration lines (figure and numbers), the acquisition as
 measured against as stated (far-outside levels flagged, :func:`.verdicts.nuisances`),
 the population across drones (measured or assumed), the corner and trace plots."""
@@ -12,27 +13,17 @@ import numpy as np
 
 from . import figures
 from .markup import Figures, Html, details, img, table, td
-from .numbers import column_decimals, fmt, fmt_sig
+from ..inference.result.status import OUT_OF_RANGE, calibration_status
+from .numbers import column_decimals, fmt
 from .verdicts import FAR, nuisances
 
 
-def _sbc_text(cal: dict, w: Html) -> str:
-    sbc = cal.get("sbc")
-    if not sbc:
-        return "not run in the study (see docs/calibration.md)."
-    share = sbc.get("outer_share")
-    p = sbc.get("pooled_p")
-    n = sbc.get("n_replicates")
-    ok = False
-    if share is not None and p is not None and n:
-        from scipy.stats import binom
-
-        lo, hi = binom.ppf([0.025, 0.975], int(n), 0.1) / int(n)  # an honest sampler's range of the share
-        ok = p > 0.05 and lo <= share <= hi
-    return (f"{fmt(n)} replicates: {fmt(share, 2)} of the truths in the outer 10% of their posterior (0.10 "
-            f"if honest), pooled rank p = {fmt_sig(p)}: "
-            + ("<span class='ok'>consistent with a calibrated posterior</span>" if ok else
-               "<span class='warn'>the posterior is not calibrated</span>") + ".")
+def _sbc_text(status, w: Html) -> str:
+    """The stored SBC of the route used and the one gate's word (:mod:`mdaug.inference.result.status`)."""
+    if status.sbc is None:
+        return f"{w.esc(status.sbc_words)} (see docs/calibration.md)."
+    return (f"<span class='{'ok' if status.passed else 'warn'}'>{w.esc(status.honesty)}</span>: "
+            f"{w.esc(status.sbc_facts)}.")
 
 
 def _lines_table(cal: dict) -> str:
@@ -108,32 +99,33 @@ def calibration_section(r: dict, figs: Figures, w: Html, report_dir: Path) -> st
            "every line's frequency and amplitude, lines sorted by frequency.</p>"]
     for cls, c in r["calibration"].items():
         d = c["diagnostics"]
+        st = calibration_status(c)
         k = f"calibration.{cls}.diagnostics"
-        status = ("<span class='ok'>converged</span>" if c["converged"] else "<span class='warn'>NOT CONVERGED</span>")
-        reason = w.esc(d.get("reason", ""))
-        for prefix in ("NOT CONVERGED: ", "converged: ", "Converged: "):
-            reason = reason[len(prefix):] if reason.startswith(prefix) else reason
         sampler = d.get("sampler", "emcee")
-        if sampler == "amortized":
-            chain = (f"amortized posterior ({fmt(d.get('amortized_seconds', 0) * 1e3)} ms, "
-                     f"{fmt(100 * d.get('amortized_inside_prior', 0))}% of its draws inside the prior); "
-                     f"emcee on the learned likelihood beside it: {fmt(d.get('n_walkers'))} walkers x "
-                     f"{fmt(d.get('chain_steps'))} steps (chain = "
-                     f"{w.num(k + '.steps_over_tau', d.get('steps_over_tau'), 1)} x max tau)")
+        if st.route == "amortized":
+            chain = (f"{w.esc(st.route_words)} ({fmt(d.get('amortized_seconds', 0) * 1e3)} ms, "
+                     f"{fmt(100 * d.get('amortized_inside_prior', 0))}% of its draws inside the prior)")
+            if st.check:
+                chain += (f"; {w.esc(st.check)}, {fmt(d.get('n_walkers'))} walkers x {fmt(d.get('chain_steps'))} "
+                          f"steps (chain = {w.num(k + '.steps_over_tau', d.get('steps_over_tau'), 1)} x max tau)")
         elif sampler == "smc":
-            chain = f"SMC, {fmt(d.get('smc_n_particles'))} particles, {fmt(d.get('smc_stages'))} stages"
+            chain = (f"{w.esc(st.route_words)}: {fmt(d.get('smc_n_particles'))} particles, "
+                     f"{fmt(d.get('smc_stages'))} stages")
         else:
-            chain = (f"{fmt(d.get('n_walkers'))} walkers x {fmt(d.get('chain_steps'))} steps (chain = "
-                     f"{w.num(k + '.steps_over_tau', d.get('steps_over_tau'), 1)} x max tau)")
-        out.append(f"<h3>{w.esc(cls)}: {status}</h3>")
-        reason = reason[:1].upper() + reason[1:]
-        out.append(f"<ul><li><b>Convergence</b>: {reason}.</li>"
-                   f"<li><b>Sampler</b>: {chain}; min ESS {w.num(k + '.ess_min', d.get('ess_min'), 0)}; acceptance "
-                   f"{w.num(k + '.acceptance_mean', d.get('acceptance_mean'), 2)}; "
-                   f"{w.num(k + '.seconds', d.get('seconds'), 0)} s on {fmt(c.get('n_profiles'))} measurements.</li>"
-                   f"<li><b>SBC</b>: {_sbc_text(c, w)}</li></ul>")
-        if d.get("out_of_range"):
-            out.append(f"<p class='warn'>{w.esc(d.get('out_of_range_why', 'measurements unlike the training set'))}</p>")
+            chain = (f"{w.esc(st.route_words)}: {fmt(d.get('n_walkers'))} walkers x {fmt(d.get('chain_steps'))} "
+                     f"steps (chain = {w.num(k + '.steps_over_tau', d.get('steps_over_tau'), 1)} x max tau)")
+        if st.route != "amortized" or st.check:
+            chain += (f"; min ESS {w.num(k + '.ess_min', d.get('ess_min'), 0)}; acceptance "
+                      f"{w.num(k + '.acceptance_mean', d.get('acceptance_mean'), 2)}")
+        out.append(f"<h3>{w.esc(cls)}: <span class='{'ok' if st.trusted else 'warn'}'>{w.esc(st.headline)}</span></h3>")
+        detail = w.esc(st.convergence_detail)
+        out.append(f"<ul><li><b>Convergence</b>: {w.esc(st.convergence)}{': ' + detail if detail else ''}.</li>"
+                   f"<li><b>Route</b>: {chain}; {w.num(k + '.seconds', d.get('seconds'), 0)} s on "
+                   f"{fmt(c.get('n_profiles'))} measurements.</li>"
+                   f"<li><b>SBC</b>: {_sbc_text(st, w)}</li></ul>")
+        if st.out_of_range:
+            out.append(f"<p class='warn'>{w.esc(OUT_OF_RANGE)}: "
+                       f"{w.esc(st.out_of_range_why or 'measurements unlike the training set')}</p>")
         if c.get("lines"):
             out.append(figs.embed(f"posterior_{cls}", figures.posterior_lines_figure(c, cls),
                                   f"{cls} posterior, label-free: each engine's four vibration lines, frequency in Hz "
@@ -149,7 +141,8 @@ def calibration_section(r: dict, figs: Figures, w: Html, report_dir: Path) -> st
         corner = c.get("corner")
         if corner and Path(corner).is_file():
             rel = os.path.relpath(corner, report_dir)
-            body += (f"<p>Full corner plot (every sampled parameter, per engine, in physical units): "
+            body += (f"<p>Corner plot of the brightest engine's label-free lines (physical units; true values "
+                     f"where the data are simulated): "
                      f"<a href='{html.escape(rel)}'>{html.escape(rel)}</a> (opens at full size).</p>"
                      + img(corner, f"{cls} corner plot of the sampled parameters"))
         trace = c.get("trace")

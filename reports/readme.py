@@ -142,18 +142,19 @@ def results_section(results: dict) -> str:
 
 
 def _calibration_text(cls: str, v: dict, fmt) -> str:
-    """One class's calibration in a line: the amortized posterior (exact draws of the
-    estimator, its SBC) and the emcee route beside it, or the chain of the closed form."""
-    d = v["diagnostics"]
-    chain = (f"{fmt(d.get('steps_over_tau'), 1)} x max tau, min ESS {fmt(d.get('ess_min'), 0)}")
-    if d.get("sampler") == "amortized":
-        sbc = ((d.get("estimator") or {}).get("sbc") or {}).get("amortized") or {}
-        lo, hi = sbc.get("coverage90_range") or (None, None)
-        em = d.get("emcee") or {}
-        return (f"{cls} amortized posterior (the shipped estimator's exact draws; its SBC: outer-10% share "
-                f"{fmt(sbc.get('outer_share'), 3)}, 90% coverage {fmt(lo, 2)}-{fmt(hi, 2)}); the emcee route "
-                f"beside it {'converged' if em.get('converged') else 'NOT converged'} ({chain})")
-    return f"{cls} {'converged' if v['converged'] else 'NOT converged'} (chain {chain})"
+    """One class's calibration in a line: its status in the words of every other place
+    (:func:`mdaug.inference.result.status.calibration_status`), the stored SBC, the
+    chain's length where there is one, and the route run as a check."""
+    from ..inference.result.status import calibration_status
+
+    d, st = v["diagnostics"], calibration_status(v)
+    chain = f"{fmt(d.get('steps_over_tau'), 1)} x max tau, min ESS {fmt(d.get('ess_min'), 0)}"
+    text = f"{cls} {st.headline}" + (f" ({st.sbc_facts})" if st.sbc else "")
+    if st.route != "amortized":
+        text += f"; chain {chain}"
+    elif st.check:
+        text += f"; {st.check} ({chain})"
+    return text
 
 
 def replace_section(text: str, section: str) -> str:

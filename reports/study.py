@@ -216,7 +216,18 @@ class Study(TrainingStages):
         return {"cls": cls, "method": self.calibration_method(cls, acquisition),
                 "profiles": self.load_set(f"calibration_{cls}")[0],
                 "drones": self.load_drones(f"calibration_{cls}", cls), "acquisition": acquisition,
-                "settings": settings, "seed": _stage_seed(self.cfg, "calibrate", cls), "out": str(self.out)}
+                "settings": settings, "seed": _stage_seed(self.cfg, "calibrate", cls), "out": str(self.out),
+                "truth": self.calibration_truth(cls)}
+
+    def calibration_truth(self, cls: str):
+        """The calibrated drone's true class vector where the study knows it (simulated
+        data from the reference drone itself, one calibration drone), else None; the
+        corner plot draws it."""
+        if not self.cfg.simulated or self.cfg.simulation.calibration_drones != 1:
+            return None
+        from ..generator import load_reference
+
+        return load_reference(cls).to_array()
 
     def calibration_method(self, cls: str, acquisition) -> str:
         """'amortized' or 'likelihood' (protocol.calibration.method; auto: amortized for a

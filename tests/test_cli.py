@@ -237,7 +237,8 @@ def test_run_summary_is_a_table_without_python_dicts():
     assert re.match(r"^CNN sigma_p_fit \(sigma_p 0.2\) \*\s+new\s+136\s+0.700\s+\[0.680, 0.820\]\s+0.50\s+0.90$",
                     lines[2]), lines[2]
     assert any(line.startswith("ceiling xgb") for line in lines)
-    assert "calibration HELI: NOT converged (NOT CONVERGED: budget)" in text
+    assert "calibration HELI: likelihood route: NOT converged; SBC: no SBC stored (budget)" in text
+    assert "calibration QUAD: likelihood route: converged; SBC: no SBC stored" in text
 
 
 # ---- files left by killed writers, file modes -------------------------------------------------------

@@ -1,0 +1,196 @@
+"""One status vocabulary (issue 39 item 1): the terminal report, the corner plot's title,
+the study's results.json record, its HTML report and the README's line say the same
+words about one calibration; and the corner plot (item 8) shows the brightest engine's
+label-free lines, the truth where known and a legend that fits the route."""
+import json
+
+import numpy as np
+import pytest
+
+from mdaug.generator import IDX, N_PARAMS, load_reference
+from mdaug.generator.acquisition import Acquisition
+from mdaug.inference.diagnostics.yardsticks import honest
+from mdaug.inference.result.posterior import FORMAT, CalibrationResult, import_arviz
+from mdaug.inference.result.status import calibration_status
+from mdaug.inference.space.priors import SHARED, Priors
+from mdaug.radar import RadarConfig
+
+HONEST_SBC = {"outer_share": 0.11, "coverage90_range": [0.87, 0.93], "n_replicates": 300, "pooled_p": 3.6e-7}
+OVERCONFIDENT_SBC = {"outer_share": 0.164, "coverage90_range": [0.70, 0.89], "n_replicates": 100, "pooled_p": 8e-19}
+
+
+def _amortized_diag(route: str, converged: bool, out_of_range: bool = False) -> dict:
+    """Diagnostics as calibrate_amortized writes them (the fields the status reads)."""
+    emcee = {"converged": converged, "likelihood": "summary", "seconds": 20.0, "tau_max": 280.0, "steps": 4000,
+             "steps_over_tau": 14.3, "acceptance_mean": 0.3, "n_walkers": 32, "ess_min": 300.0, "rhat_max": 1.02,
+             "reason": ("chain 4000 steps >= 50 x max tau 80" if converged else
+                        "NOT CONVERGED: time budget of 20 s ended at 14.3 x max tau (280 steps; need 50)")}
+    d = {"sampler": "amortized" if route == "amortized" else "emcee", "route": route, "amortized_seconds": 0.02,
+         "amortized_inside_prior": 0.97, "seconds": 20.0,
+         "estimator": {"class": "QUAD", "ramps": 4, "simulations": 100, "simulator": "scene",
+                       "sbc": {"amortized": HONEST_SBC, "emcee": OVERCONFIDENT_SBC}},
+         "emcee": emcee, "out_of_range": out_of_range,
+         "out_of_range_why": ("the two learned posteriors disagree on 2 of 8 quantities: the measurements are unlike "
+                              "the estimator's training set") if out_of_range else "",
+         **{k: emcee[k] for k in ("n_walkers", "steps_over_tau", "ess_min", "acceptance_mean", "tau_max")},
+         "chain_steps": emcee["steps"], "identified": {}, "identified_ratio": 0.5}
+    if route == "amortized":
+        d.update(converged=True, reason="amortized posterior: exact draws from the trained estimator")
+    else:
+        d.update(converged=converged, reason=emcee["reason"])
+    return d
+
+
+def _result(diag: dict, cls: str = "QUAD", n: int = 400, seed: int = 0) -> CalibrationResult:
+    """A small amortized CalibrationResult: draws scattered around the class reference
+    (every engine's Gamma jittered, so each draw has a brightest engine)."""
+    ref = load_reference(cls)
+    pr = Priors.from_reference(ref)
+    e = ref.n_engines
+    rng = np.random.default_rng(seed)
+    x = np.repeat(ref.to_array()[None], n, axis=0).reshape(n, e, N_PARAMS)
+    x = x * np.exp(0.03 * rng.standard_normal(x.shape))
+    for name, (lo, hi) in pr.bounds.items():
+        if name in IDX:
+            x[..., IDX[name]] = np.clip(x[..., IDX[name]], lo, hi)
+    az = import_arviz()
+    post = {name: x[None, :, :, IDX[name]] for name in ("Gamma",) + SHARED}
+    idata = az.from_dict(posterior=post, dims={name: ["engine"] for name in post})
+    meta = {"format": FORMAT, "class_name": cls, "n_engines": e, "n_measurements": 3, "priors": pr.to_dict(),
+            "radar": RadarConfig().to_dict(), "acquisition": Acquisition.measured(4).to_dict(),
+            "likelihood": {"likelihood": "simulation-based"}, "marginal": True, "amortized": True,
+            "fit": {}, "best_fit": np.median(x.reshape(n, -1), axis=0).tolist(), "diagnostics": diag}
+    idata.posterior.attrs["mdaug"] = json.dumps(meta, default=float)
+    return CalibrationResult(idata)
+
+
+def _corner_figure(res, path, monkeypatch, **kw):
+    """Draw the corner plot and keep its figure (the title and legend read back)."""
+    import mdaug.radar.plots as radar_plots
+
+    kept = {}
+    save = radar_plots.save_figure
+
+    def keep(fig, p, **k):
+        kept["fig"] = fig
+        kept["texts"] = [t.get_text() for sub in fig.subfigs for t in ([sub._suptitle] if sub._suptitle else [])]
+        kept["legend"] = [t.get_text() for sub in fig.subfigs for lg in sub.legends for t in lg.get_texts()]
+        kept["axes"] = len(fig.axes)
+        kept["xlabels"] = [ax.get_xlabel() for ax in fig.axes if ax.get_xlabel()]
+        kept["green"] = [ln.get_xdata()[0] for ax in fig.axes for ln in ax.lines
+                         if ln.get_color() == "C2" and ax.get_xlabel() == "f1 (Hz)"]
+        return save(fig, p, **k)
+
+    monkeypatch.setattr(radar_plots, "save_figure", keep)
+    res.plot_corner(path, **kw)
+    return kept
+
+
+def _study_record(res) -> dict:
+    """The calibration's record as the study writes it into results.json."""
+    from mdaug.reports.jobs import calibration_record
+    from mdaug.reports.results_file import jsonable
+
+    return json.loads(json.dumps(jsonable(calibration_record(res))))
+
+
+CASES = [  # (route, converged, out of range) -> the words every place must print
+    ("amortized", True, False, "amortized route: exact draws; SBC: honest"),
+    ("emcee", False, True, "emcee route: NOT converged; SBC: overconfident; out of range"),
+    ("emcee", True, False, "emcee route: converged; SBC: overconfident"),
+]
+
+
+@pytest.mark.parametrize("route,converged,oor,headline", CASES)
+def test_terminal_corner_title_and_results_json_say_the_same_words(route, converged, oor, headline, tmp_path,
+                                                                   monkeypatch):
+    res = _result(_amortized_diag(route, converged, oor))
+    st = calibration_status(res)
+    assert st.headline == headline
+    # the terminal report
+    text = res.report()
+    assert f"status: {headline}" in text
+    assert ("NOT CONVERGED" in text) is False  # one spelling: 'NOT converged'
+    if not converged:
+        assert "WARNING: NOT converged: time budget of 20 s ended" in text
+    # the corner plot's title, read back from the figure
+    kept = _corner_figure(res, tmp_path / "c.png", monkeypatch)
+    assert any(headline in t for t in kept["texts"]), kept["texts"]
+    # the record in results.json: the same status, and the same status read back from it
+    rec = _study_record(res)
+    assert rec["status"]["headline"] == headline and rec["converged"] == st.converged
+    assert calibration_status(rec).headline == headline
+    # the report page and the README line print it from the record
+    from mdaug.reports.markup import Html
+    from mdaug.reports.page_calibration import calibration_section
+    from mdaug.reports.readme import _calibration_text
+    from mdaug.reports.numbers import fmt
+
+    class NoFigures:
+        def embed(self, *a, **k):
+            return ""
+
+    page = calibration_section({"calibration": {"QUAD": rec}}, NoFigures(), Html(), tmp_path)
+    assert f"QUAD: <span class='{'ok' if st.trusted else 'warn'}'>{headline}</span>" in page
+    assert f"QUAD {headline}" in _calibration_text("QUAD", rec, fmt)
+    if oor:
+        assert "out of range: the two learned posteriors disagree" in page and "out of range" in text
+
+
+def test_honesty_is_the_yardsticks_gate_and_the_rank_test_is_words():
+    """'honest' is exactly the gate of diagnostics.yardsticks; a failing rank test beside
+    a passing gate is said in words, not as a second verdict."""
+    st = calibration_status(_amortized_diag("amortized", True))
+    assert honest(HONEST_SBC) and st.honesty == "honest" and st.passed
+    assert st.rank_note.startswith("the rank histograms are not flat (p = 3.6e-07): the shape of the posterior "
+                                   "differs from the simulator's, though its outer share and coverage pass")
+    assert "honest: on 300 simulated drones, outer-10% share 0.110 (at most 0.13" in st.sbc_words
+    # coverage 0.84 < 0.85: overconfident by the gate, though the outer share passes
+    d = _amortized_diag("amortized", True)
+    d["estimator"]["sbc"]["amortized"] = {**HONEST_SBC, "coverage90_range": [0.84, 0.92], "pooled_p": 0.3}
+    st = calibration_status(d)
+    assert not honest(d["estimator"]["sbc"]["amortized"]) and st.honesty == "overconfident" and not st.trusted
+    assert st.rank_note == "the rank histograms are flat (p = 0.3)"
+    del d["estimator"]["sbc"]["amortized"]
+    assert calibration_status(d).honesty == "no SBC stored"
+    # the closed-form route: its sampler, its chain, no SBC stored
+    st = calibration_status({"sampler": "smc", "converged": False, "reason": "NOT CONVERGED: ESS 40"})
+    assert (st.route, st.headline) == ("likelihood", "likelihood route: NOT converged; SBC: no SBC stored")
+    assert st.convergence_detail == "ESS 40" and "tempered SMC" in st.route_words
+    # the emcee route names the likelihood it sampled
+    assert "summary likelihood" in calibration_status(_amortized_diag("emcee", True)).route_words
+
+
+def test_the_check_route_keeps_its_own_words():
+    st = calibration_status(_amortized_diag("amortized", True))
+    assert st.check == "emcee route, run as a check: converged" and st.check_detail.startswith("chain 4000 steps")
+    d = _amortized_diag("amortized", True)
+    d["emcee"]["converged"], d["emcee"]["reason"] = False, "NOT CONVERGED: budget"
+    st = calibration_status(d)
+    assert st.check == "emcee route, run as a check: NOT converged" and st.check_detail == "budget"
+    assert st.headline == "amortized route: exact draws; SBC: honest"  # the check is not the route used
+    del d["emcee"]
+    assert calibration_status(d).check == ""
+
+
+def test_corner_shows_the_brightest_engine_with_truths_and_a_legend_for_the_route(tmp_path, monkeypatch):
+    res = _result(_amortized_diag("amortized", True), cls="QUAD")
+    ref = load_reference("QUAD").to_array()
+    kept = _corner_figure(res, tmp_path / "c.png", monkeypatch, truths=ref)
+    assert kept["axes"] == 64  # one 8 x 8 corner: the brightest engine's four lines, frequency and amplitude
+    assert sorted(set(kept["xlabels"])) == sorted([f"f{j} (Hz)" for j in range(1, 5)]
+                                                  + [f"A{j} (mm)" for j in range(1, 5)])
+    assert not any("Gamma" in s or "lnG" in s for s in kept["xlabels"])
+    assert "true values (the simulated drone)" in kept["legend"]
+    assert not any("best fit" in t for t in kept["legend"])  # an amortized posterior has no global fit
+    # the truth drawn is the brightest engine's lowest line (QUAD's engine 3: Gamma 0.011)
+    xe = ref.reshape(-1, N_PARAMS)
+    from mdaug.inference.space.priors import engine_lines
+
+    w, _, _ = engine_lines(xe[np.argmax(xe[:, IDX["Gamma"]])])
+    assert kept["green"] and np.isclose(kept["green"][0], w.min() / (2 * np.pi))
+    # every engine on request; no truths: no truth in the legend
+    kept = _corner_figure(res, tmp_path / "all.png", monkeypatch, engines="all")
+    assert kept["axes"] == 4 * 64 and not any("true" in t for t in kept["legend"])
+    with pytest.raises(ValueError, match="engines"):
+        res.plot_corner(tmp_path / "x.png", engines="faint")
