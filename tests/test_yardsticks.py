@@ -96,3 +96,16 @@ def test_route_table_passes_the_exact_posterior_fails_a_narrow_one_and_ranks_a_w
     assert table["default"] == "exact"
     # the exact posterior's log score is the expected entropy-plus-nothing: 0.5 log(2 pi e / 6)
     assert rows["exact"]["log_score"] == pytest.approx(0.5 * np.log(2 * np.pi * np.e / 6), abs=0.12)
+
+
+def test_the_widening_recovers_a_log_linear_scale_of_chi_square_gaps():
+    from mdaug.inference.emulator.train import fit_widening
+
+    rng = np.random.default_rng(4)
+    u = rng.normal(size=(3000, 3)) * [1.0, 2.0, 0.5]
+    true_logw = 0.4 + 0.6 * (u[:, 0] - u[:, 0].mean()) / u[:, 0].std()
+    gaps = np.exp(true_logw) * rng.chisquare(8, size=len(u))
+    w = fit_widening(u, gaps, 8)
+    assert w["intercept"] == pytest.approx(0.4, abs=0.05)
+    assert w["slope"][0] == pytest.approx(0.6, abs=0.05)
+    assert abs(w["slope"][1]) < 0.05 and abs(w["slope"][2]) < 0.05

@@ -13,7 +13,12 @@ error (a small network :class:`.net.ErrorNet` fitted by maximum likelihood to th
 emulator's residuals on held-out simulated drones, net of the noise in its targets:
 the emulator is worse where training drones were sparse), c >= 1 an inflation chosen
 on other held-out drones so that the chi-square of the truth's residual has its
-expected median (stated in the file: ``inflation``).
+expected median (stated in the file: ``inflation``), times a widening w(u) >= 1 (a
+log-linear function of u, ``widening``) fitted so that twice the gap between the
+likelihood's maximum and its value at the truth is the chi-square of d degrees of
+freedom that an honest likelihood gives (Wilks): where the emulator's error is
+smooth in u the truth's residual looks right while the maximum moves away from the
+truth, and only this second check sees it.
 """
 from __future__ import annotations
 
@@ -43,6 +48,7 @@ class SummaryModel:
     cov_net: CovarianceNet
     error_net: ErrorNet
     inflation: float = 1.0
+    widening: dict | None = None
 
     @property
     def dim(self) -> int:
@@ -79,15 +85,26 @@ class SummaryModel:
         chol = self._nets(u, True)[1]
         return chol @ np.swapaxes(chol, -1, -2)
 
-    def moments(self, u: np.ndarray, n_measurements: int) -> tuple[np.ndarray, np.ndarray]:
+    def moments(self, u: np.ndarray, n_measurements: int, widen: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """(mu (N, D), covariance (N, D, D)) of the whitened mean of n measurements of drones u (N, d)."""
+        u = np.atleast_2d(np.asarray(u, float))
         mean, chol, ab = self._nets(u, True)
-        return mean, self.covariance_from(chol @ np.swapaxes(chol, -1, -2), ab, n_measurements)
+        cov = self.covariance_from(chol @ np.swapaxes(chol, -1, -2), ab, n_measurements)
+        return mean, cov * self.widen(u)[:, None, None] if widen else cov
 
     def covariance_from(self, within: np.ndarray, ab: np.ndarray, n_measurements: int) -> np.ndarray:
         """c (W (1 / n + a) + b I) (module doc) from W (N, D, D) and (a, b) (N, 2)."""
         eye = np.eye(within.shape[-1])
         return self.inflation * (within * (1.0 / int(n_measurements) + ab[:, :1, None]) + ab[:, 1:, None] * eye)
+
+    def widen(self, u: np.ndarray) -> np.ndarray:
+        """w(u) >= 1 (N,) (module doc); 1 without a fitted widening."""
+        u = np.atleast_2d(np.asarray(u, float))
+        if not self.widening:
+            return np.ones(len(u))
+        w = self.widening
+        t = (u - np.asarray(w["centre"])) / np.asarray(w["scale"])
+        return np.exp(np.clip(w["intercept"] + t @ np.asarray(w["slope"]), 0.0, 5.0))
 
     def summarise(self, profiles: np.ndarray) -> np.ndarray:
         """(D,) whitened mean folded log-profile of measurements (M, L)."""
@@ -149,7 +166,8 @@ def to_parts(model: SummaryModel, report: dict | None = None) -> tuple[dict, dic
     for name in ("centre", "basis", "between"):
         state[f"whitening.{name}"] = torch.as_tensor(np.asarray(getattr(model.whitening, name), np.float64))
     meta = {"format": SUMMARY_FORMAT, "net": model.net.config(), "cov_net": model.cov_net.config(),
-            "error_net": model.error_net.config(), "inflation": float(model.inflation), "training": dict(report or {})}
+            "error_net": model.error_net.config(), "inflation": float(model.inflation),
+            "widening": model.widening, "training": dict(report or {})}
     return meta, state
 
 
@@ -163,6 +181,16 @@ def from_parts(meta: dict, state: dict, class_name: str, acquisition: Acquisitio
     v = meta.get("inflation")
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 1:
         raise ValueError(f"{src}: meta.json field 'summary.inflation' must be a finite number >= 1, got {v!r}")
+    widening = meta.get("widening")
+    if widening is not None:
+        d = label_free.dim
+        ok = isinstance(widening, dict) and sorted(widening) == ["centre", "intercept", "scale", "slope"]
+        ok = ok and _finite(widening["intercept"]) and all(
+            isinstance(widening[k], list) and len(widening[k]) == d and all(_finite(v) for v in widening[k])
+            for k in ("centre", "scale", "slope"))
+        if not ok or not all(v > 0 for v in widening["scale"]):
+            raise ValueError(f"{src}: meta.json field 'summary.widening' must hold a finite intercept and {d} finite "
+                             "numbers each of centre, scale (> 0) and slope")
     nets = {}
     for key, cls_, prefix in (("net", Emulator, "net."), ("cov_net", CovarianceNet, "cov."),
                               ("error_net", ErrorNet, "error.")):
@@ -196,4 +224,8 @@ def from_parts(meta: dict, state: dict, class_name: str, acquisition: Acquisitio
     if meta["cov_net"]["n_components"] != cfg["n_components"] or meta["cov_net"]["n_offsets"] != cfg["n_offsets"]:
         raise ValueError(f"{src}: meta.json fields 'summary.net' and 'summary.cov_net' disagree on the summary's size")
     return SummaryModel(class_name, acquisition, radar, label_free, Whitening(**arrays), nets["net"], nets["cov_net"],
-                        nets["error_net"], float(meta["inflation"]))
+                        nets["error_net"], float(meta["inflation"]), widening)
+
+
+def _finite(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and bool(np.isfinite(v))

@@ -15,6 +15,40 @@ import torch
 from torch import nn
 
 
+def _split(n: int, val_share: float, g: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+    """(train, validation) indices: the last ``val_share`` of a seeded permutation of n."""
+    perm = torch.randperm(n, generator=g)
+    n_val = max(1, int(round(val_share * n)))
+    return perm[n_val:], perm[:n_val]
+
+
+def _early_stopping(net: nn.Module, epoch, validate, *, epochs: int, patience: int, tol: float, sched=None) -> dict:
+    """Run ``epoch()`` (one pass of training; returns its loss or None) and ``validate()``
+    (the validation loss) up to ``epochs`` times, stopping after ``patience`` epochs
+    without a gain of ``tol``; ``net`` ends with the weights of its best epoch."""
+    best, best_state, hist, since = np.inf, None, [], 0
+    for _ in range(epochs):
+        net.train()
+        train_loss = epoch()
+        net.eval()
+        with torch.no_grad():
+            v = float(validate())
+        if sched is not None:
+            sched.step(v)
+        hist.append(v if train_loss is None else (train_loss, v))
+        if v < best - tol:
+            best, since = v, 0
+            best_state = {k: t.clone() for k, t in net.state_dict().items()}
+        else:
+            since += 1
+            if since >= patience:
+                break
+    net.load_state_dict(best_state)
+    net.eval()
+    vals = [h[1] if isinstance(h, tuple) else h for h in hist]
+    return {"history": hist, "best_epoch": int(np.argmin(vals)), "best_val": best}
+
+
 class Emulator(nn.Module):
     """u (n, d), sketch (n, F) -> mean whitened summary (n, D) (module doc)."""
 
@@ -48,19 +82,15 @@ def fit(net: Emulator, u: np.ndarray, sk: np.ndarray, target: np.ndarray, *, see
     (train / validation loss per epoch, the best epoch). The validation split is the
     last ``val_share`` of a seeded permutation."""
     g = torch.Generator().manual_seed(int(seed))
-    n = len(u)
-    perm = torch.randperm(n, generator=g)
-    n_val = max(1, int(round(val_share * n)))
-    tr, va = perm[n_val:], perm[:n_val]
+    tr, va = _split(len(u), val_share, g)
     U, S, T = (torch.as_tensor(a, dtype=torch.float32) for a in (u, sk, target))
     x = torch.cat([U, S], 1)
     net.in_mean.copy_(x[tr].mean(0))
     net.in_sd.copy_(x[tr].std(0).clamp_min(1e-6))
     opt = torch.optim.Adam(net.parameters(), lr=lr)
     sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=0.5, patience=patience // 3)
-    best, best_state, hist, since = np.inf, None, [], 0
-    for epoch in range(epochs):
-        net.train()
+
+    def epoch():
         order = tr[torch.randperm(len(tr), generator=g)]
         tot = 0.0
         for i in range(0, len(order), batch):
@@ -70,23 +100,11 @@ def fit(net: Emulator, u: np.ndarray, sk: np.ndarray, target: np.ndarray, *, see
             loss.backward()
             opt.step()
             tot += float(loss.detach()) * len(b)
-        net.eval()
-        with torch.no_grad():
-            v = float(((net(U[va], S[va]) - T[va]) ** 2).mean())
-        sched.step(v)
-        hist.append((tot / len(tr), v))
-        if progress:
-            progress(epoch, tot / len(tr), v)
-        if v < best - 1e-5:
-            best, since = v, 0
-            best_state = {k: t.clone() for k, t in net.state_dict().items()}
-        else:
-            since += 1
-            if since >= patience:
-                break
-    net.load_state_dict(best_state)
-    net.eval()
-    return {"loss": hist, "best_epoch": int(np.argmin([h[1] for h in hist])), "best_val": best,
+        return tot / len(tr)
+
+    out = _early_stopping(net, epoch, lambda: ((net(U[va], S[va]) - T[va]) ** 2).mean(), epochs=epochs,
+                          patience=patience, tol=1e-5, sched=sched)
+    return {"loss": out["history"], "best_epoch": out["best_epoch"], "best_val": out["best_val"],
             "validation": va.numpy()}
 
 
@@ -135,9 +153,7 @@ def fit_covariance(net: CovarianceNet, u: np.ndarray, sk: np.ndarray, z: np.ndar
     validation split). Returns the history."""
     g = torch.Generator().manual_seed(int(seed))
     n, m, _ = z.shape
-    perm = torch.randperm(n, generator=g)
-    n_val = max(1, int(round(val_share * n)))
-    tr, va = perm[n_val:], perm[:n_val]
+    tr, va = _split(n, val_share, g)
     U, S = torch.as_tensor(u, dtype=torch.float32), torch.as_tensor(sk, dtype=torch.float32)
     Z = torch.as_tensor(z, dtype=torch.float32)
     dev = (Z - Z.mean(1, keepdim=True)) * float(np.sqrt(m / (m - 1)))
@@ -152,29 +168,17 @@ def fit_covariance(net: CovarianceNet, u: np.ndarray, sk: np.ndarray, z: np.ndar
         return (m * logdet + 0.5 * (w * w).sum((1, 2))).mean() / m
 
     opt = torch.optim.Adam(net.parameters(), lr=lr)
-    best, best_state, hist, since = np.inf, None, [], 0
-    for epoch in range(epochs):
-        net.train()
+
+    def epoch():
         order = tr[torch.randperm(len(tr), generator=g)]
         for i in range(0, len(order), batch):
             loss = nll(order[i: i + batch])
             opt.zero_grad()
             loss.backward()
             opt.step()
-        net.eval()
-        with torch.no_grad():
-            v = float(nll(va))
-        hist.append(v)
-        if v < best - 1e-4:
-            best, since = v, 0
-            best_state = {k: t.clone() for k, t in net.state_dict().items()}
-        else:
-            since += 1
-            if since >= patience:
-                break
-    net.load_state_dict(best_state)
-    net.eval()
-    return {"val_nll": hist, "best_epoch": int(np.argmin(hist)), "best_val": best}
+
+    out = _early_stopping(net, epoch, lambda: nll(va), epochs=epochs, patience=patience, tol=1e-4)
+    return {"val_nll": out["history"], "best_epoch": out["best_epoch"], "best_val": out["best_val"]}
 
 
 class ErrorNet(nn.Module):
@@ -205,10 +209,7 @@ def fit_error(net: ErrorNet, u: np.ndarray, within: np.ndarray, resid: np.ndarra
     minus the emulator, Gaussian with covariance W / m + a(u) W + b(u) I (maximum
     likelihood, full batch, early stopping on a seeded split). start: (alpha0, beta0)."""
     g = torch.Generator().manual_seed(int(seed))
-    n = len(u)
-    perm = torch.randperm(n, generator=g)
-    n_val = max(1, int(round(val_share * n)))
-    tr, va = perm[n_val:], perm[:n_val]
+    tr, va = _split(len(u), val_share, g)
     U = torch.as_tensor(u, dtype=torch.float64)
     W = torch.as_tensor(within, dtype=torch.float64)
     R = torch.as_tensor(resid, dtype=torch.float64)
@@ -228,22 +229,13 @@ def fit_error(net: ErrorNet, u: np.ndarray, within: np.ndarray, resid: np.ndarra
         return (torch.log(torch.diagonal(chol, dim1=1, dim2=2)).sum(1) + 0.5 * (y * y).sum(1)).mean()
 
     opt = torch.optim.Adam(net.parameters(), lr=lr, weight_decay=weight_decay)
-    best, best_state, hist, since = np.inf, None, [], 0
-    for _ in range(epochs):
+
+    def epoch():  # full batch
         loss = nll(tr)
         opt.zero_grad()
         loss.backward()
         opt.step()
-        with torch.no_grad():
-            v = float(nll(va))
-        hist.append(v)
-        if v < best - 1e-5:
-            best, since = v, 0
-            best_state = {k: t.clone() for k, t in net.state_dict().items()}
-        else:
-            since += 1
-            if since >= patience:
-                break
-    net.load_state_dict(best_state)
+
+    out = _early_stopping(net, epoch, lambda: nll(va), epochs=epochs, patience=patience, tol=1e-5)
     net.float().eval()
-    return {"val_nll": hist, "best_epoch": int(np.argmin(hist)), "best_val": best}
+    return {"val_nll": out["history"], "best_epoch": out["best_epoch"], "best_val": out["best_val"]}

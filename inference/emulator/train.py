@@ -11,7 +11,11 @@ split, by a seeded permutation, into a training share and two held-out shares:
    started from the pooled constants a, b), by maximum likelihood of its residuals
    (the M-measurement means; their noise W / M is part of the model);
 3. held-out B: the inflation c >= 1: the median chi-square of the truth's residual for
-   ``n_calibration``-measurement subsets (at most the drones' M) over its expected median (the model's
+   ``n_calibration``-measurement subsets (at most the drones' M) over its expected median;
+   then, on ``n_widening`` of them, the widening w(u) (:mod:`.model`): twice the gap
+   between the likelihood's maximum (BOBYQA from the truth) and its value at the truth
+   is taken as w(u) x a chi-square of d degrees of freedom, log w linear in u, fitted
+   by maximum likelihood and floored at 1 (the model's
    covariance scaled until the truth sits where a chi-square says it should).
 
 Nothing here sees the drones an SBC or a study tests on.
@@ -47,6 +51,7 @@ class EmulatorConfig:
     cov_epochs: int = 150
     held_out: float = 0.1
     n_calibration: int = 5
+    n_widening: int = 300
 
     def to_dict(self) -> dict:
         import dataclasses
@@ -100,12 +105,22 @@ def train_summary_model(x: np.ndarray, profiles: np.ndarray, label_free: LabelFr
     ratio = float(np.median(chi) / chi2.median(config.n_components))
     model.inflation = max(1.0, ratio)
     log(f"inflation: median chi-square / expected {ratio:.3f} -> c = {model.inflation:.3f}")
+    if config.n_widening:
+        gaps = likelihood_gaps(model, u[held_b][: config.n_widening], z_all[held_b][: config.n_widening, :k].mean(1), k)
+        model.widening = fit_widening(u[held_b][: config.n_widening], gaps, label_free.dim)
+        w = model.widen(u[held_b][: config.n_widening])
+        log(f"widening: 2 x likelihood gap at the truth median {np.median(gaps):.2f} (chi-square {label_free.dim}: "
+            f"{chi2.median(label_free.dim):.2f}), q90 {np.quantile(gaps, 0.9):.2f} ({chi2.ppf(0.9, label_free.dim):.2f}); "
+            f"w(u) median {np.median(w):.2f}, 10-90% {np.quantile(w, 0.1):.2f}-{np.quantile(w, 0.9):.2f}")
     report = {"config": config.to_dict(), "n_drones": int(n), "n_train": int(len(train)),
               "emulator_best_epoch": hist["best_epoch"], "emulator_val_mse": float(hist["best_val"]),
               "covariance_best_epoch": chist["best_epoch"], "covariance_val_nll": float(chist["best_val"]),
               "error_pooled": [alpha, beta], "error_best_epoch": ehist["best_epoch"], "chi2_median_ratio": ratio,
               "chi2_q90_ratio": float(np.quantile(chi, 0.9) / chi2.ppf(0.9, config.n_components)),
               "inflation": model.inflation, "seed": int(seed)}
+    if model.widening:
+        report["gap_median"] = float(np.median(gaps))
+        report["gap_q90"] = float(np.quantile(gaps, 0.9))
     return model, report
 
 
@@ -134,3 +149,56 @@ def _error_model(model: SummaryModel, u: np.ndarray, z_bar: np.ndarray, m: int) 
     best = minimize(nll, np.log([0.05, 0.01]), method="Nelder-Mead", options={"xatol": 1e-3, "fatol": 1e-3})
     a, b = np.exp(best.x)
     return float(a), float(b)
+
+
+def likelihood_gaps(model: SummaryModel, u: np.ndarray, z_bar: np.ndarray, n_measurements: int,
+                    max_eval: int = 400) -> np.ndarray:
+    """(N,) twice the gap between the summary likelihood's maximum (BOBYQA from the
+    truth, in a box of +-3 around it) and its value at the truth u (N, d), for the
+    whitened means z_bar (N, D) of n measurements; the model's widening left out."""
+    import nlopt
+
+    out = np.zeros(len(u))
+    for i, (ui, zi) in enumerate(zip(u, z_bar)):
+        def loglik(t, grad, zi=zi):
+            mean, cov = model.moments(t[None], n_measurements, widen=False)
+            c = np.linalg.cholesky(cov[0])
+            y = np.linalg.solve(c, mean[0] - zi)
+            v = -np.log(np.diag(c)).sum() - 0.5 * y @ y
+            return float(v) if np.isfinite(v) else -1e12
+
+        opt = nlopt.opt(nlopt.LN_BOBYQA, len(ui))
+        opt.set_max_objective(loglik)
+        opt.set_maxeval(int(max_eval))
+        opt.set_lower_bounds(ui - 3.0)
+        opt.set_upper_bounds(ui + 3.0)
+        opt.set_initial_step(0.05)
+        at_truth = loglik(ui, None)
+        try:
+            opt.optimize(ui.copy())
+            best = opt.last_optimum_value()
+        except (nlopt.RoundoffLimited, RuntimeError, ValueError):
+            best = at_truth
+        out[i] = 2.0 * max(best - at_truth, 0.0)
+    return out
+
+
+def fit_widening(u: np.ndarray, gaps: np.ndarray, dim: int) -> dict:
+    """The widening's log-linear model (:mod:`.model`): gaps_i ~ w(u_i) chi2_dim, log w =
+    intercept + slope . (u - centre) / scale, by maximum likelihood (Nelder-Mead),
+    slopes shrunk by a weak ridge."""
+    from scipy.optimize import minimize
+    from scipy.stats import chi2
+
+    centre, scale = u.mean(0), np.maximum(u.std(0), 1e-9)
+    t = (u - centre) / scale
+    g = np.maximum(gaps, 1e-6)
+
+    def nll(p):
+        logw = p[0] + t @ p[1:]
+        return float(-(chi2.logpdf(g / np.exp(logw), dim) - logw).sum() + 0.5 * np.sum(p[1:] ** 2))
+
+    best = minimize(nll, np.zeros(1 + u.shape[1]), method="Powell", options={"xtol": 1e-4, "ftol": 1e-6,
+                                                                            "maxfev": 20000})
+    return {"intercept": float(best.x[0]), "slope": best.x[1:].tolist(), "centre": centre.tolist(),
+            "scale": scale.tolist()}

@@ -1,0 +1,125 @@
+"""Give a shipped estimator its summary likelihood and its route table.
+
+python tests/benchmarks/summary_likelihood.py --class HELI --ramps 32 --prior DIR --near DIR \
+    [--model PREFIX | --save-model PREFIX] [--route-truths 40] [--specimens 20] [--time-budget 60] \
+    [--workers 2] [--seed 7] --out FILE
+
+1. The training drones: --prior, shards of prior drones with 10 measurements each
+   (``simulate_shards`` of ``SimulationSpec(CLASS, K)``, e.g. a train-estimator work
+   folder's ``sims/``), and --near, shards of drones of the specimen model around the
+   reference at 4 x its spreads (``SimulationSpec(..., near_width=4)``); the last 1,000
+   prior drones are left out (fresh drones for a check by hand).
+2. The summary likelihood (``mdaug.inference.emulator.train.train_summary_model``),
+   or one trained before (--model PREFIX: PREFIX.json + PREFIX.pt as --save-model
+   wrote them), attached to the shipped estimator of the class and K.
+3. The route table: both routes on --route-truths fresh prior drones (SBC: outer
+   share, coverage, log score, widths, seconds, convergence) and on --specimens drones
+   drawn as the study draws new drones (widths, truth inside, log score, and the
+   Cramer-Rao bound); the file's default route is the best log score among the routes
+   that pass the gate on the prior drones.
+Prints both tables and writes FILE.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+import warnings
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+warnings.simplefilter("ignore")
+
+
+def table(rows: dict, names: list[str], crb: dict | None = None) -> str:
+    lines = [f"{'route':10s} {'verdict':13s} {'outer':>6s} {'cov90':>10s} {'log score':>9s} {'conv':>5s} {'s/drone':>7s}  "
+             "90% width / truth: " + " ".join(n.replace("line ", "") for n in names)]
+    for name, r in rows.items():
+        lo, hi = r["coverage90_range"]
+        lines.append(f"{name:10s} {r.get('verdict', ''):13s} {r['outer_share']:6.3f} {lo:4.2f}-{hi:4.2f} "
+                     f"{r['log_score']:9.2f} {r['converged_share']:5.2f} {r['seconds_median']:7.1f}  "
+                     + " ".join(f"{r['width_over_truth'][n]:.2f}" for n in names))
+    if crb:
+        lines.append(f"{'CRB':10s} {'':13s} {'':6s} {'':10s} {'':9s} {'':5s} {'':7s}  "
+                     + " ".join(f"{crb[n]:.2f}" for n in names))
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    import numpy as np
+    import torch
+
+    from mdaug.generator.acquisition import Acquisition
+    from mdaug.inference.amortized.shipped import find
+    from mdaug.inference.amortized.simulate import load_shards
+    from mdaug.inference.emulator.model import from_parts, to_parts
+    from mdaug.inference.emulator.train import train_summary_model
+    from mdaug.inference.estimator_job import estimator_sbc, specimen_table
+    from mdaug.inference.settings import CalibrationSettings
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--class", dest="cls", required=True)
+    ap.add_argument("--ramps", type=int, required=True)
+    ap.add_argument("--prior", required=True)
+    ap.add_argument("--near", required=True)
+    ap.add_argument("--model", default=None)
+    ap.add_argument("--save-model", default=None)
+    ap.add_argument("--route-truths", type=int, default=40)
+    ap.add_argument("--specimens", type=int, default=20)
+    ap.add_argument("--time-budget", type=float, default=60.0)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--out", required=True)
+    a = ap.parse_args(argv)
+    torch.set_num_threads(1)
+    t0 = time.perf_counter()
+    est = find(a.cls, Acquisition.measured(a.ramps))
+    lf = est.label_free
+    if a.model:
+        meta = json.load(open(f"{a.model}.json"))
+        model = from_parts(meta, torch.load(f"{a.model}.pt", weights_only=True), a.cls, est.spec.acquisition,
+                           est.spec.radar, lf, a.model)
+        report = meta["training"]
+    else:
+        import glob
+
+        xs, ys = [], []
+        for i, folder in enumerate((a.prior, a.near)):
+            x, y = load_shards(sorted(glob.glob(os.path.join(folder, "shard-*.npz"))))
+            if i == 0:
+                x, y = x[:-1000], y[:-1000]
+            xs.append(x)
+            ys.append(y)
+        model, report = train_summary_model(np.concatenate(xs), np.concatenate(ys), lf, a.cls, est.spec.acquisition,
+                                            est.spec.radar, seed=a.seed)
+        report.update(prior_drones=int(len(xs[0])), near_drones=int(len(xs[1])), near_width=4.0)
+        if a.save_model:
+            meta, state = to_parts(model, report)
+            torch.save(state, f"{a.save_model}.pt")
+            open(f"{a.save_model}.json", "w").write(json.dumps(meta))
+    est.with_summary(model, report)
+    est.meta["summary"]["command"] = "python tests/benchmarks/summary_likelihood.py " + " ".join(sys.argv[1:])
+    est.save(a.out)  # the routes read the file in their worker processes
+    settings = CalibrationSettings(progress=False, time_budget=a.time_budget)
+    sbc = estimator_sbc(est, a.route_truths, seed=a.seed, workers=a.workers, mcmc_truths=a.route_truths,
+                        mcmc_settings=settings, estimator_path=a.out, log=print)
+    spec = specimen_table(est, a.specimens, settings=settings, seed=a.seed + 1, workers=a.workers,
+                          estimator_path=a.out)
+    names = lf.names[:8]
+    print(f"\nroute table, {a.route_truths} fresh prior drones (SBC), {a.cls} K = {a.ramps}, 5 measurements:")
+    print(table(sbc["route_table"]["rows"], names))
+    print(f"\n{a.specimens} drones drawn as the study draws new drones (specimen model around the reference):")
+    print(table(spec["rows"], names, spec.get("crb_width_over_truth")))
+    keep = {k: v for k, v in est.meta.get("sbc", {}).items() if k == "amortized" or k == "n_measurements"}
+    est.meta["sbc"] = {**keep, "route_table": sbc["route_table"], "emcee": sbc["emcee"], "specimens": spec}
+    default = sbc["route_table"]["default"] or "amortized"
+    est.meta["default_route"] = default
+    est.save(a.out)
+    print(f"\ndefault route: {default}; wrote {a.out} ({time.perf_counter() - t0:.0f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
