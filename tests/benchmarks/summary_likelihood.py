@@ -99,8 +99,8 @@ def main(argv=None) -> int:
             meta, state = to_parts(model, report)
             torch.save(state, f"{a.save_model}.pt")
             open(f"{a.save_model}.json", "w").write(json.dumps(meta))
+    report = {**report, "command": "python tests/benchmarks/summary_likelihood.py " + " ".join(sys.argv[1:])}
     est.with_summary(model, report)
-    est.meta["summary"]["command"] = "python tests/benchmarks/summary_likelihood.py " + " ".join(sys.argv[1:])
     est.save(a.out)  # the routes read the file in their worker processes
     settings = CalibrationSettings(progress=False, time_budget=a.time_budget)
     sbc = estimator_sbc(est, a.route_truths, seed=a.seed, workers=a.workers, mcmc_truths=a.route_truths,
