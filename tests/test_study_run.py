@@ -213,8 +213,9 @@ def test_a_select_file_per_class_becomes_one_selection_set(tmp_path):
 
     rng = np.random.default_rng(0)
 
-    def write(name, labels):
-        profiles = rng.uniform(0.1, 1.0, (len(labels), 400))
+    def write(name, labels):  # peak-centred, as the calibration's data check asks of signatures
+        profiles = rng.uniform(0.1, 0.9, (len(labels), 400))
+        profiles[:, 200] = 1.0
         np.savez(tmp_path / name, profiles=profiles, labels=np.array(labels), ramps_per_frame=np.array(4))
 
     write("cal_HELI.npz", ["HELI"] * 3)
