@@ -29,7 +29,7 @@ from pathlib import Path
 
 from .finding import command, finding
 from .markup import Text
-from .numbers import decimals, fmt, spread
+from .numbers import column_decimals, decimals, fmt, spread
 from .page_strategies import choice_mark, setting_text
 from .verdicts import judge, label
 
@@ -72,17 +72,25 @@ def check_command(results: dict) -> str:
     return command(results)
 
 
-def _cells(w, m: dict, classes) -> list[str]:
-    """The figures of one row: balanced accuracy, the runs, accuracy, recalls."""
+def _intervals(m: dict, classes) -> dict:
+    """One row's intervals by column: balanced accuracy, accuracy, each class's recall."""
     ci = m.get("ci") or {}
-    bal_ci = ci.get("balanced_accuracy")
+    out = {"balanced": ci.get("balanced_accuracy"), "accuracy": ci.get("accuracy")}
+    out.update({c: ((ci.get("per_class") or {}).get(c) or {}).get("recall") for c in classes})
+    return out
+
+
+def _cells(w, m: dict, classes, d: dict) -> list[str]:
+    """The figures of one row: balanced accuracy, the runs, accuracy, recalls; ``d``: the
+    decimals of each column (one precision per column, :func:`.numbers.column_decimals`)."""
+    ci = _intervals(m, classes)
     runs = m.get("n_runs") or 1
-    cells = [w.val_ci(None, m["balanced_accuracy"], None, bal_ci),
-             spread(m.get("seed_spread"), decimals(bal_ci)) + f" ({runs})" if runs > 1 else "1 run",
-             w.val_ci(None, m["accuracy"], None, ci.get("accuracy"))]
+    cells = [w.val_ci(None, m["balanced_accuracy"], None, ci["balanced"], d["balanced"]),
+             spread(m.get("seed_spread"), d["balanced"]) + f" ({runs})" if runs > 1 else "1 run",
+             w.val_ci(None, m["accuracy"], None, ci["accuracy"], d["accuracy"])]
     for c in classes:
         r = (m["per_class"].get(c) or {}).get("recall")
-        cells.append(w.val_ci(None, r, None, ((ci.get("per_class") or {}).get(c) or {}).get("recall")))
+        cells.append(w.val_ci(None, r, None, ci[c], d[c]))
     return cells
 
 
@@ -124,16 +132,21 @@ def results_section(results: dict) -> str:
         lines.append("| " + " | ".join(head) + " |")
         lines.append("|" + "|".join("---" for _ in head) + "|")
         verdicts = j["sets"][test]["results"]
+        ceil = j.get("ceiling")
+        ceil_m = (results["ceiling"]["models"][ceil["model"]]["tests"].get(test) if ceil else None)
+        rows = [s["tests"][test] for s in results["strategies"].values() if test in s["tests"]]
+        rows += [ceil_m] if ceil_m else []
+        ivs = [_intervals(m, classes) for m in rows]
+        d = {col: column_decimals([iv[col] for iv in ivs]) for col in ("balanced", "accuracy", *classes)}
         for name, s in results["strategies"].items():
             if test in s["tests"]:
                 cells = [name + choice_mark(j, name), setting_text(results, name),
-                         *_cells(w, s["tests"][test], classes), label(verdicts[name])]
+                         *_cells(w, s["tests"][test], classes, d), label(verdicts[name])]
                 lines.append("| " + " | ".join(cells) + " |")
-        ceil = j.get("ceiling")
-        if ceil and test in results["ceiling"]["models"][ceil["model"]]["tests"]:
+        if ceil_m:
             v = j["sets"][test]["ceiling"]
             cells = [f"ceiling: {ceil['model']} trained on the simulator's own data (chosen on the selection set)",
-                     "–", *_cells(w, results["ceiling"]["models"][ceil["model"]]["tests"][test], classes), label(v)]
+                     "–", *_cells(w, ceil_m, classes, d), label(v)]
             lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
     cal = ["Calibration: " + "; ".join(_calibration_text(c, v, fmt) for c, v in results["calibration"].items()) + "."]
