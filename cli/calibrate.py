@@ -8,7 +8,6 @@ message says which exist).
 """
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 from .common import (BYTES_SPECTRUM, EXIT_NOT_CONVERGED, SECONDS_LIKELIHOOD_RAMP, add_verb, check_size, count, count_2, ramps_factor,

@@ -29,7 +29,7 @@ from pathlib import Path
 
 from .finding import command, finding
 from .markup import Text
-from .numbers import column_decimals, decimals, fmt, spread
+from .numbers import column_decimals, fmt, spread
 from .page_strategies import choice_mark, setting_text
 from .verdicts import judge, label
 

@@ -3,7 +3,8 @@
 SBC alone cannot rank routes: the prior itself passes it. So every route is judged on
 the same fresh drones by
 
-* the **gate** (:func:`honest`): not overconfident, i.e. an outer-10% share of at most
+* the **gate** (:func:`mdaug.inference.result.status.honest`, the one rule a status word
+  is printed from too): not overconfident, i.e. an outer-10% share of at most
   ``OUTER_MAX`` and every quantity's 90% coverage at least ``COVERAGE_MIN`` (a
   posterior wider than the data allow passes; it loses on the next yardstick);
 * the **log score** of the truth (:func:`log_score`): the mean of -log q(u_true | x)
@@ -20,11 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-OUTER_MAX = 0.13
-"""Largest outer-10% share an honest posterior may show (0.10 expected)."""
-COVERAGE_MIN = 0.85
-"""Smallest 90% coverage of any quantity an honest posterior may show (0.90 expected)."""
-
+from ..result.status import COVERAGE_MIN, OUTER_MAX, honest, verdict  # noqa: F401 (the gate, one place)
 
 def gaussian_log_density(samples: np.ndarray, points: np.ndarray, ridge: float = 1e-9) -> np.ndarray:
     """log N(point; mean, cov) of a Gaussian fitted to each replicate's draws:
@@ -47,16 +44,6 @@ def log_score(samples_u: np.ndarray, truths_u: np.ndarray) -> dict:
     nl = -gaussian_log_density(samples_u, truths_u)
     return {"log_score": float(np.mean(nl)), "log_score_median": float(np.median(nl)),
             "log_score_by_drone": nl.tolist()}
-
-
-def honest(summary: dict) -> bool:
-    """The gate (module doc) on a :func:`.routes.run` summary."""
-    return bool(summary["outer_share"] <= OUTER_MAX and summary["coverage90_range"][0] >= COVERAGE_MIN)
-
-
-def verdict(summary: dict) -> str:
-    """One word for the gate: 'honest' or 'overconfident' (the terms the docs use)."""
-    return "honest" if honest(summary) else "overconfident"
 
 
 def route_table(routes: dict, truths_q: np.ndarray, data, names: list[str], *, to_unbounded, n_rank: int = 199,

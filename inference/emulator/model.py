@@ -29,7 +29,6 @@ import torch
 
 from ...generator.acquisition import Acquisition
 from ...radar import RadarConfig
-from ..amortized.target import LabelFree
 from .net import CovarianceNet, Emulator, ErrorNet
 from .sketch import sketch
 from .summary import Whitening
@@ -42,7 +41,9 @@ class SummaryModel:
     class_name: str
     acquisition: Acquisition
     radar: RadarConfig
-    label_free: LabelFree
+    label_free: object
+    """A :class:`mdaug.inference.amortized.target.LabelFree` (duck-typed: this room
+    imports nothing of the amortized room, which holds it)."""
     whitening: Whitening
     net: Emulator
     cov_net: CovarianceNet
@@ -172,7 +173,7 @@ def to_parts(model: SummaryModel, report: dict | None = None) -> tuple[dict, dic
 
 
 def from_parts(meta: dict, state: dict, class_name: str, acquisition: Acquisition, radar: RadarConfig,
-               label_free: LabelFree, src: str) -> SummaryModel:
+               label_free, src: str) -> SummaryModel:
     """The model of :func:`to_parts`' output; ValueError naming ``src`` and the field
     that does not fit."""
     if not isinstance(meta, dict) or meta.get("format") != SUMMARY_FORMAT:

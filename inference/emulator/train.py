@@ -29,7 +29,6 @@ import torch
 
 from ...generator.acquisition import Acquisition
 from ...radar import RadarConfig
-from ..amortized.target import LabelFree
 from .model import SummaryModel
 from .net import CovarianceNet, Emulator, ErrorNet, fit, fit_covariance, fit_error
 from .sketch import sketch
@@ -59,7 +58,7 @@ class EmulatorConfig:
         return dataclasses.asdict(self)
 
 
-def train_summary_model(x: np.ndarray, profiles: np.ndarray, label_free: LabelFree, class_name: str,
+def train_summary_model(x: np.ndarray, profiles: np.ndarray, label_free, class_name: str,
                         acquisition: Acquisition, radar: RadarConfig = RadarConfig(),
                         config: EmulatorConfig = EmulatorConfig(), *, seed: int = 0, log=print) -> tuple[SummaryModel, dict]:
     """The model and a report of its training (module doc)."""

@@ -12,7 +12,8 @@ The facts and their words:
   the closed-form route, sampled by emcee, SMC or a Laplace approximation);
 * **convergence**: ``converged`` or ``NOT converged`` for a chain (emcee, SMC, Laplace);
   ``exact draws`` for the amortized route, which has no chain;
-* **honesty**, by the one gate of :func:`mdaug.inference.diagnostics.yardsticks.honest`
+* **honesty**, by the one gate, :func:`honest` (here; the route table of
+  :mod:`mdaug.inference.diagnostics.yardsticks` uses it too)
   (outer-10% share <= 0.13 and every quantity's 90% coverage >= 0.85) on the SBC stored
   in the estimator file for the route used: ``honest``, ``overconfident`` or
   ``no SBC stored`` (the closed-form route stores none). The rank histograms' pooled
@@ -24,14 +25,31 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-from ..diagnostics.yardsticks import COVERAGE_MIN, OUTER_MAX, honest, verdict
+OUTER_MAX = 0.13
+"""Largest outer-10% share an honest posterior may show (0.10 expected)."""
+COVERAGE_MIN = 0.85
+"""Smallest 90% coverage of any quantity an honest posterior may show (0.90 expected)."""
+
+
+def honest(summary: dict) -> bool:
+    """The gate, the one rule for 'honest' (used here and by the route table of
+    :mod:`mdaug.inference.diagnostics.yardsticks`): not overconfident, an outer-10% share
+    of at most OUTER_MAX and every quantity's 90% coverage at least COVERAGE_MIN, on an
+    SBC summary (:func:`mdaug.inference.diagnostics.routes.run`). A posterior wider than
+    the data allow passes; the log score tells it apart."""
+    return bool(summary["outer_share"] <= OUTER_MAX and summary["coverage90_range"][0] >= COVERAGE_MIN)
+
+
+def verdict(summary: dict) -> str:
+    """One word for the gate: 'honest' or 'overconfident'."""
+    return "honest" if honest(summary) else "overconfident"
 
 RANK_P = 0.05
 """Pooled rank chi-square p below which the rank histograms are called not flat."""
 
 EXACT, CONVERGED, NOT_CONVERGED = "exact draws", "converged", "NOT converged"
 NO_SBC = "no SBC stored"
-"""The honesty word where no SBC is stored (else the gate's own word, :func:`~mdaug.inference.diagnostics.yardsticks.verdict`)."""
+"""The honesty word where no SBC is stored (else the gate's own word, :func:`verdict`)."""
 OUT_OF_RANGE = "out of range"
 
 _LIKELIHOODS = {"summary": "the estimator's summary likelihood", "ratio": "the estimator's learned likelihood ratio"}
