@@ -151,7 +151,7 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
     out["amortized"]["inside_prior_share"] = float(np.mean(accepted))
     log(f"  SBC amortized: {headline(out['amortized'])}; draws inside the prior {np.mean(accepted):.3f}")
     if mcmc_truths:
-        from .diagnostics.yardsticks import route_table
+        from .diagnostics.routes import route_table
         from .settings import CalibrationSettings
 
         settings = mcmc_settings or CalibrationSettings(progress=False)

@@ -3,7 +3,8 @@ Fisher information and Cramer-Rao bound, the log score and the route table's gat
 import numpy as np
 import pytest
 
-from mdaug.inference.diagnostics.yardsticks import gaussian_log_density, honest, route_table
+from mdaug.inference.diagnostics.routes import route_table
+from mdaug.inference.diagnostics.yardsticks import gaussian_log_density, honest
 from mdaug.inference.emulator.model import cramer_rao, fisher_information
 from mdaug.inference.emulator.summary import Whitening, folded_log_profile
 

@@ -30,17 +30,11 @@ import numpy as np
 
 from ...generator import IDX, N_PARAMS
 from ..space.layout import Layout
-from ..space.priors import PERMUTATIONS, Priors, align_lines, engine_lines
+from ..space.priors import PERMUTATIONS, Priors, align_lines, brightness_order, engine_lines
 
 _PERMS = np.asarray(PERMUTATIONS)
 _EPS = 1e-9
 TARGET = 2  # the definition of q (module doc); stored in every estimator file
-
-
-def brightness_order(xe: np.ndarray) -> np.ndarray:
-    """Engine indices (n, E) of per-engine vectors xe (n, E, 13) ordered by brightness
-    (Gamma decreasing, ties in their given order): the engine order of this target."""
-    return np.argsort(-xe[..., IDX["Gamma"]], axis=1, kind="stable")
 
 
 class LabelFree:

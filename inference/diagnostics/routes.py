@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from .sbc import summarise
-from .yardsticks import log_score
+from .yardsticks import honest, log_score, verdict
 
 LEVELS = (0.5, 0.6, 0.7, 0.8, 0.9, 0.95)
 
@@ -116,3 +116,18 @@ def headline(summary: dict) -> str:
             f"(KS p {summary['tarp_ks_p']:.2f}), "
             + (f"log score {summary['log_score']:.2f}, " if "log_score" in summary else "")
             + f"{summary['n_replicates']} truths")
+
+
+def route_table(routes: dict, truths_q: np.ndarray, data, names: list[str], *, to_unbounded, n_rank: int = 199,
+                seed: int = 0, progress=None, workers: int = 1) -> dict:
+    """Every route (name -> draw(profiles, n, seed) -> (q draws (n, d), converged)) on
+    the same drones; returns {"rows": {name: summary}, "default": name or None}: the
+    best (lowest) log score among the routes that pass the gate (None when none does)."""
+    rows = {}
+    for name, draw in routes.items():
+        rows[name] = run(draw, truths_q, data, names, n_rank=n_rank, seed=seed, to_unbounded=to_unbounded,
+                         progress=progress, desc=f"SBC {name}", workers=workers)
+        rows[name]["verdict"] = verdict(rows[name])
+    passing = [n for n, r in rows.items() if honest(r)]
+    default = min(passing, key=lambda n: rows[n]["log_score"]) if passing else None
+    return {"rows": rows, "default": default}

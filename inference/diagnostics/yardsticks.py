@@ -14,8 +14,8 @@ the same fresh drones by
 * the median 90% width over the truth per quantity (:mod:`.routes`), beside the
   Cramer-Rao bound where the route has a likelihood.
 
-:func:`route_table` runs several routes on the same drones and names the default: the
-best log score among the routes that pass the gate.
+:func:`mdaug.inference.diagnostics.routes.route_table` runs several routes on the same
+drones and names the default: the best log score among the routes that pass the gate.
 """
 from __future__ import annotations
 
@@ -44,20 +44,3 @@ def log_score(samples_u: np.ndarray, truths_u: np.ndarray) -> dict:
     nl = -gaussian_log_density(samples_u, truths_u)
     return {"log_score": float(np.mean(nl)), "log_score_median": float(np.median(nl)),
             "log_score_by_drone": nl.tolist()}
-
-
-def route_table(routes: dict, truths_q: np.ndarray, data, names: list[str], *, to_unbounded, n_rank: int = 199,
-                seed: int = 0, progress=None, workers: int = 1) -> dict:
-    """Every route (name -> draw(profiles, n, seed) -> (q draws (n, d), converged)) on
-    the same drones; returns {"rows": {name: summary}, "default": name or None}: the
-    best (lowest) log score among the routes that pass the gate (None when none does)."""
-    from .routes import run
-
-    rows = {}
-    for name, draw in routes.items():
-        rows[name] = run(draw, truths_q, data, names, n_rank=n_rank, seed=seed, to_unbounded=to_unbounded,
-                         progress=progress, desc=f"SBC {name}", workers=workers)
-        rows[name]["verdict"] = verdict(rows[name])
-    passing = [n for n, r in rows.items() if honest(r)]
-    default = min(passing, key=lambda n: rows[n]["log_score"]) if passing else None
-    return {"rows": rows, "default": default}

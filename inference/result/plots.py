@@ -64,7 +64,7 @@ def plot_corner(res, path, engines: str = "brightest", truths=None):
     from matplotlib.lines import Line2D
 
     from ...radar.plots import save_figure
-    from .posterior import label_free_lines
+    from ..space.priors import label_free_lines
 
     if engines not in ENGINE_CHOICES:
         raise ValueError(f"engines must be one of {ENGINE_CHOICES}, got {engines!r}")

@@ -31,7 +31,7 @@ import numpy as np
 
 from ...generator import IDX, N_PARAMS, PARAM_NAMES
 from ...generator.model import circular_stats
-from ..space.priors import PHASE_NAMES, SHARED, Priors, engine_lines
+from ..space.priors import PHASE_NAMES, SHARED, Priors, label_free_lines
 
 FORMAT = "mdaug-posterior-2"
 READABLE_FORMATS = ("mdaug-posterior-1", FORMAT)
@@ -247,7 +247,7 @@ class CalibrationResult:
         Which line is the roll, the pitch or a mixing term is a labelling the data
         cannot fix (:mod:`..space.priors`); the lines themselves are what one profile
         identifies. ``by_brightness``: engines in each draw's brightness order (see
-        :func:`label_free_lines`) instead of their stored order."""
+        :func:`~mdaug.inference.space.priors.label_free_lines`) instead of their stored order."""
         return label_free_lines(self.draws().reshape(self.n_draws, self.n_engines, N_PARAMS), by_brightness)
 
     def summary(self):
@@ -350,19 +350,3 @@ class CalibrationResult:
         if n_engines is not None and res.n_engines != int(n_engines):
             raise DataFileError(f"{path}: posterior has {res.n_engines} engine(s), expected {n_engines}")
         return res
-
-
-def label_free_lines(xe: np.ndarray, by_brightness: bool = False) -> np.ndarray:
-    """Engine vectors xe (n, E, 13) -> their lines (n, E, 4, 2): (frequency rad/s,
-    amplitude m) sorted by frequency; ``by_brightness``: engines ordered by Gamma
-    decreasing in each row (the engine order of the amortized estimator's label-free
-    quantities, :func:`mdaug.inference.amortized.target.brightness_order`), so engine 0
-    is the brightest, the one the measurements identify."""
-    xe = np.asarray(xe, float)
-    w, a, _ = engine_lines(xe)
-    order = np.argsort(w, axis=-1)
-    out = np.stack([np.take_along_axis(w, order, -1), np.take_along_axis(a, order, -1)], axis=-1)
-    if by_brightness:
-        eng = np.argsort(-xe[..., IDX["Gamma"]], axis=1, kind="stable")
-        out = np.take_along_axis(out, eng[..., None, None], 1)
-    return out

@@ -175,3 +175,24 @@ def align_lines(x: np.ndarray, reference: np.ndarray) -> np.ndarray:
     for j, r in ((2, "p"), (3, "m")):
         out[..., IDX[f"A_{r}"]], out[..., IDX[f"phi_{r}"]] = a2[..., j], ph2[..., j]
     return out.reshape(n, e * N_PARAMS)
+
+
+def brightness_order(xe: np.ndarray) -> np.ndarray:
+    """Engine indices (n, E) of per-engine vectors xe (n, E, 13) ordered by brightness
+    (Gamma decreasing, ties in their given order): the engine order of the label-free
+    quantities (:mod:`mdaug.inference.amortized.target`), engine 0 the one the
+    measurements identify."""
+    return np.argsort(-np.asarray(xe)[..., IDX["Gamma"]], axis=1, kind="stable")
+
+
+def label_free_lines(xe: np.ndarray, by_brightness: bool = False) -> np.ndarray:
+    """Engine vectors xe (n, E, 13) -> their lines (n, E, 4, 2): (frequency rad/s,
+    amplitude m) sorted by frequency; ``by_brightness``: engines ordered by
+    :func:`brightness_order`, so engine 0 is the brightest."""
+    xe = np.asarray(xe, float)
+    w, a, _ = engine_lines(xe)
+    order = np.argsort(w, axis=-1)
+    out = np.stack([np.take_along_axis(w, order, -1), np.take_along_axis(a, order, -1)], axis=-1)
+    if by_brightness:
+        out = np.take_along_axis(out, brightness_order(xe)[..., None, None], 1)
+    return out
