@@ -400,7 +400,8 @@ def test_train_estimator_and_sbc_verbs(tmp_path, capsys, refused):
     meta = AmortizedEstimator.load(out).meta
     assert meta["n_simulations"] == 100
     assert meta["command"].startswith("mdaug train-estimator --class HELI --ramps 4 --simulations 100")
-    assert main(argv[:-1] + [str(tmp_path / "h2.zip"), "--work", f"{out}.work"]) == 0
+    assert AmortizedEstimator.load(out).summary is not None  # trained beside the networks
+    assert main(argv[:-1] + [str(tmp_path / "h2.zip"), "--work", f"{out}.work", "--no-summary"]) == 0
     assert "resumed at epoch 1" in capsys.readouterr().out
     js = tmp_path / "sbc.json"
     assert main(["sbc", "--class", "HELI", "--ramps", "4", "--estimator", str(out), "--truths", "3",
