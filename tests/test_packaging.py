@@ -101,3 +101,13 @@ def test_the_dependencies_pull_no_cuda_runtime(tmp_path):
     names = {i["metadata"]["name"].lower() for i in json.loads(report.read_text())["install"]}
     assert "xgboost-cpu" in names and "xgboost" not in names
     assert not [n for n in names if n.startswith("nvidia")], sorted(names)
+
+
+def test_every_source_folder_is_a_package_the_wheel_ships():
+    """setup.py ships the folders that hold an __init__.py; a folder of modules without
+    one would be left out of a non-editable install (an editable one still finds it)."""
+    listed = subprocess.run(["git", "ls-files", "-z", "*.py"], cwd=ROOT, capture_output=True, check=True).stdout
+    folders = {Path(n).parent for n in listed.decode().split("\0") if n}
+    missing = sorted(str(f) for f in folders
+                     if f != Path(".") and f.parts[0] != "tests" and not (ROOT / f / "__init__.py").is_file())
+    assert not missing, f"folders of modules without __init__.py: {missing}"
