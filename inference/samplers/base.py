@@ -93,20 +93,29 @@ class Sampler(Protocol):
 
 
 @contextlib.contextmanager
-def stop_on_sigint():
-    """While active, Ctrl-C sets ``flag["stop"]`` instead of raising inside the
+def stop_on_signal(signum: int = signal.SIGINT, *, only_if_handled: bool = False):
+    """While active, the signal sets ``flag["stop"]`` instead of raising inside the
     likelihood (where a sampler library would print its parameter dump); the sampler
-    checks the flag at step boundaries. Outside the main thread it does nothing."""
+    checks the flag at step boundaries and raises outside the library's call. Outside
+    the main thread it does nothing; with ``only_if_handled``, nor where the signal has
+    no handler of ours to defer (a worker, which SIGTERM kills at once, printing
+    nothing). The previous handler is restored."""
     flag = {"stop": False}
-    if threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread() or (
+            only_if_handled and signal.getsignal(signum) in (signal.SIG_DFL, signal.SIG_IGN, None)):
         yield flag
         return
 
     def handler(signum, frame):
         flag["stop"] = True
 
-    old = signal.signal(signal.SIGINT, handler)
+    old = signal.signal(signum, handler)
     try:
         yield flag
     finally:
-        signal.signal(signal.SIGINT, old)
+        signal.signal(signum, old)
+
+
+def stop_on_sigint():
+    """Ctrl-C as a flag (:func:`stop_on_signal`)."""
+    return stop_on_signal(signal.SIGINT)

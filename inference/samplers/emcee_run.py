@@ -30,13 +30,14 @@ from __future__ import annotations
 
 import contextlib
 import io
+import signal
 import time
 from pathlib import Path
 
 import numpy as np
 
 from ...generator.model import wrap_phase
-from .base import CalibrationInterrupted, SamplerRun, stop_on_sigint
+from .base import CalibrationInterrupted, SamplerRun, stop_on_signal, stop_on_sigint
 from .toolbox import estimate_tau
 
 GROUP = "mcmc"
@@ -116,33 +117,6 @@ def _check_backend(path: Path, fp: str, shape) -> int:
             return it
     except OSError as exc:
         raise ValueError(f"{path}: not a readable HDF5 file ({exc})") from exc
-
-
-@contextlib.contextmanager
-def _stop_on_sigterm():
-    """While active (main thread, where a handler such as
-    :func:`mdaug.radar.workers.terminate_as_interrupt`'s is installed), SIGTERM sets ``flag["stop"]`` instead of raising
-    inside the log-probability, where emcee would print its parameter dump and
-    traceback before re-raising; the loop checks the flag after each step and raises
-    the interrupt outside emcee's call (recognised as a SIGTERM by
-    :func:`mdaug.radar.workers.was_terminated`). The previous handler is restored."""
-    import signal
-    import threading
-
-    flag = {"stop": False}
-    if threading.current_thread() is not threading.main_thread() or \
-            signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, signal.SIG_IGN, None):
-        yield flag  # a worker (SIGTERM kills it at once, printing nothing) or no handler to defer
-        return
-
-    def handler(signum, frame):
-        flag["stop"] = True
-
-    old = signal.signal(signal.SIGTERM, handler)
-    try:
-        yield flag
-    finally:
-        signal.signal(signal.SIGTERM, old)
 
 
 def _interrupted(terminated: bool, message: str):
@@ -237,7 +211,8 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
     bar = progress_bar(total=bar_total(max(target, check)), initial=min(it, bar_total(max(target, check))),
                        desc="calibration", unit="step", progress=settings.progress)
     try:
-        with stop_on_sigint() as flag, _stop_on_sigterm() as term, contextlib.redirect_stdout(io.StringIO()):
+        with stop_on_sigint() as flag, stop_on_signal(signal.SIGTERM, only_if_handled=True) as term, \
+                contextlib.redirect_stdout(io.StringIO()):
             while True:
                 if it > 0 and it % check == 0 or (max_steps is not None and it >= max_steps) or out_of_time:
                     chain = sampler.get_chain()
