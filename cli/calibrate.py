@@ -257,6 +257,7 @@ def _interrupted(args) -> str:
 
 def add_calibrate(sub, parents, help):
     from ..inference.settings import FIT_ALGORITHMS, SAMPLERS, CalibrationSettings
+    from .calibrate_amortized import EMCEE_BUDGET
     from ..radar.profiles import NORMALISATIONS
 
     d, q = CalibrationSettings(), CalibrationSettings.quick()
@@ -317,7 +318,7 @@ def add_calibrate(sub, parents, help):
     g.add_argument("--time-budget", type=positive_float, default=None, metavar="SECONDS",
                    help="stop sampling after this many seconds when not converged before (the run is then "
                         f"flagged not converged; rerun to continue) (default: {d.time_budget:g}; the emcee route "
-                        "beside the amortized posterior: 120)")
+                        f"of a trained estimator: {EMCEE_BUDGET:g})")
     g.add_argument("--max-steps", type=positive_int, default=None, metavar="N",
                    help=f"emcee step budget, steps per walker (default: {_cap(d_emcee.max_steps)}; --quick: "
                         f"{_cap(q_emcee.max_steps)})")
