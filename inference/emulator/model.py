@@ -64,8 +64,9 @@ class SummaryModel:
         q = self.label_free.from_unbounded(u)
         return sketch(q, self.label_free.E, self.whitening.n_offsets, self.radar)
 
-    def _nets(self, u: np.ndarray, covariance: bool):
-        """(mu (n, D), Cholesky factor of W (n, D, D) or None, (a, b) (n, 2) or None)."""
+    def nets(self, u: np.ndarray, covariance: bool = True):
+        """The three networks at drones u (N, d): (mu (N, D), the within-drone covariance
+        W (N, D, D) or None, the emulator error's (a, b) (N, 2) or None)."""
         u = np.atleast_2d(np.asarray(u, float))
         tu = torch.as_tensor(u, dtype=torch.float32)
         ts = torch.as_tensor(self.features(u), dtype=torch.float32)
@@ -75,22 +76,17 @@ class SummaryModel:
                 return mean, None, None
             chol = self.cov_net(tu, ts).double().numpy()
             ab = torch.exp(self.error_net(tu)).double().numpy()
-        return mean, chol, ab
+        return mean, chol @ np.swapaxes(chol, -1, -2), ab
 
     def mean(self, u: np.ndarray) -> np.ndarray:
         """mu(u): (n, D) expected whitened summary of drones u (n, d)."""
-        return self._nets(u, False)[0]
-
-    def within(self, u: np.ndarray) -> np.ndarray:
-        """W(u): (n, D, D) within-drone covariance of one measurement's whitened summary."""
-        chol = self._nets(u, True)[1]
-        return chol @ np.swapaxes(chol, -1, -2)
+        return self.nets(u, False)[0]
 
     def moments(self, u: np.ndarray, n_measurements: int, widen: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """(mu (N, D), covariance (N, D, D)) of the whitened mean of n measurements of drones u (N, d)."""
         u = np.atleast_2d(np.asarray(u, float))
-        mean, chol, ab = self._nets(u, True)
-        cov = self.covariance_from(chol @ np.swapaxes(chol, -1, -2), ab, n_measurements)
+        mean, w, ab = self.nets(u)
+        cov = self.covariance_from(w, ab, n_measurements)
         return mean, cov * self.widen(u)[:, None, None] if widen else cov
 
     def covariance_from(self, within: np.ndarray, ab: np.ndarray, n_measurements: int) -> np.ndarray:

@@ -89,11 +89,10 @@ def train_summary_model(x: np.ndarray, profiles: np.ndarray, label_free, class_n
     log(f"within-drone covariance: best epoch {chist['best_epoch']}, validation nll {chist['best_val']:.4f}")
     error_net = ErrorNet(label_free.dim)
     model = SummaryModel(class_name, acquisition, radar, label_free, wh, net, cov_net, error_net)
-    alpha, beta = _error_model(model, u[held_a], z[held_a], m)
-    mean_a, chol_a, _ = model._nets(u[held_a], True)
-    ehist = fit_error(error_net, u[held_a], chol_a @ np.swapaxes(chol_a, -1, -2), z[held_a] - mean_a, m,
-                      start=(alpha, beta), seed=seed)
-    ab = model._nets(u[held_a], True)[2]
+    mean_a, w_a, _ = model.nets(u[held_a])
+    alpha, beta = _error_model(w_a, z[held_a] - mean_a, m)
+    ehist = fit_error(error_net, u[held_a], w_a, z[held_a] - mean_a, m, start=(alpha, beta), seed=seed)
+    ab = model.nets(u[held_a])[2]  # the fitted error network's
     log(f"emulator error: pooled a {alpha:.4f}, b {beta:.4f}; per drone a {np.median(ab[:, 0]):.4f} "
         f"({np.quantile(ab[:, 0], 0.1):.4f}-{np.quantile(ab[:, 0], 0.9):.4f}), b {np.median(ab[:, 1]):.4f} "
         f"({np.quantile(ab[:, 1], 0.1):.4f}-{np.quantile(ab[:, 1], 0.9):.4f}), best epoch {ehist['best_epoch']}")
@@ -130,13 +129,11 @@ def residual_chi2(model: SummaryModel, u: np.ndarray, z_bar: np.ndarray, n_measu
     return np.einsum("ni,ni->n", r, np.linalg.solve(cov, r[..., None])[..., 0])
 
 
-def _error_model(model: SummaryModel, u: np.ndarray, z_bar: np.ndarray, m: int) -> tuple[float, float]:
-    """alpha, beta >= 0 maximising sum_i log N(z_bar_i - mu(u_i); 0, W_i (1 / m + alpha) + beta I)."""
+def _error_model(w: np.ndarray, r: np.ndarray, m: int) -> tuple[float, float]:
+    """alpha, beta >= 0 maximising sum_i log N(r_i; 0, W_i (1 / m + alpha) + beta I): the
+    pooled emulator error, from residuals r (N, D) = z_bar - mu(u) and W (N, D, D)."""
     from scipy.optimize import minimize
 
-    mean, chol, _ = model._nets(u, True)
-    w = chol @ np.swapaxes(chol, -1, -2)
-    r = z_bar - mean
     eye = np.eye(w.shape[-1])
 
     def nll(t):
