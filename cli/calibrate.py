@@ -257,6 +257,7 @@ def _interrupted(args) -> str:
 
 def add_calibrate(sub, parents, help):
     from ..inference.settings import FIT_ALGORITHMS, SAMPLERS, CalibrationSettings
+    from ..inference.amortized.estimator import ROUTES
     from .calibrate_amortized import EMCEE_BUDGET
     from ..radar.profiles import NORMALISATIONS
 
@@ -300,13 +301,15 @@ def add_calibrate(sub, parents, help):
                         "acquisitions, likelihood for the published single chirp) (default: %(default)s)")
     g.add_argument("--estimator", type=Path, default=None,
                    help="estimator ZIP of mdaug train-estimator (default: the shipped one for the class and K)")
-    g.add_argument("--route", choices=("amortized", "emcee"), default=None,
+    g.add_argument("--route", choices=ROUTES, default=None,
                    help="amortized: the estimator's posterior (exact draws, milliseconds); emcee: nlopt + emcee "
-                        "on the estimator's likelihood (the summary likelihood where it has one) (default: the "
-                        "estimator's default route)")
+                        "on the estimator's likelihood (the summary likelihood where it has one); smc: tempered "
+                        "SMC from the amortized posterior to that likelihood's posterior (weights between its "
+                        "modes) (default: the estimator's default route)")
     g.add_argument("--check-route", action="store_true",
-                   help="also run the other route and keep its draws beside the posterior, as a check "
-                        "(default: only the route used runs)")
+                   help="also run another route and keep its draws beside the posterior, as a check: emcee "
+                        "beside the amortized route, the amortized draws beside a sampled one (default: only "
+                        "the route used runs)")
     g = p.add_argument_group("budget and sampler")
     g.add_argument("--quick", action="store_true",
                    help="short run of seconds, for a first look (usually not converged)")
@@ -318,7 +321,7 @@ def add_calibrate(sub, parents, help):
     g.add_argument("--time-budget", type=positive_float, default=None, metavar="SECONDS",
                    help="stop sampling after this many seconds when not converged before (the run is then "
                         f"flagged not converged; rerun to continue) (default: {d.time_budget:g}; the emcee route "
-                        f"of a trained estimator: {EMCEE_BUDGET:g})")
+                        f"and smc routes of a trained estimator: {EMCEE_BUDGET:g})")
     g.add_argument("--max-steps", type=positive_int, default=None, metavar="N",
                    help=f"emcee step budget, steps per walker (default: {_cap(d_emcee.max_steps)}; --quick: "
                         f"{_cap(q_emcee.max_steps)})")

@@ -47,7 +47,7 @@ def calibration_method(args, acquisition) -> str:
 
 
 def amortized_settings(args, settings):
-    """The emcee route's settings: EMCEE_BUDGET seconds unless ``--time-budget`` says otherwise."""
+    """The sampled routes' settings (emcee, smc): EMCEE_BUDGET seconds unless ``--time-budget`` says otherwise."""
     return settings.replace(time_budget=EMCEE_BUDGET) if args.time_budget is None else settings
 
 

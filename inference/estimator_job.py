@@ -128,10 +128,11 @@ def sbc_data(spec: SimulationSpec, n: int, seed, workers: int = 1):
 
 
 def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, workers: int = 1, mcmc_truths: int = 0,
-                  mcmc_settings=None, estimator_path=None, progress=None, log=print) -> dict:
+                  mcmc_settings=None, estimator_path=None, progress=None, log=print, routes=None) -> dict:
     """SBC of the amortized route on n_truths fresh drones (5 measurements each), and
-    the route table of both routes on the first ``mcmc_truths`` of them (in ``workers``
-    processes when ``estimator_path``, the estimator's file, is given)."""
+    the route table of ``routes`` (default :func:`sampled_routes`) on the first
+    ``mcmc_truths`` of them (in ``workers`` processes when ``estimator_path``, the
+    estimator's file, is given)."""
     lf = est.label_free
     vectors, profiles = sbc_data(est.spec, n_truths, seed, workers)
     truths = lf.quantities(vectors)
@@ -157,25 +158,36 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
         settings = mcmc_settings or CalibrationSettings(progress=False)
         k = min(mcmc_truths, n_truths)
         routes = {name: Route(name, est if estimator_path is None else estimator_path, settings)
-                  for name in ("amortized", "emcee")}
+                  for name in (routes or sampled_routes(est))}
         table = route_table(routes, truths[:k], profiles[:k], lf.names, to_unbounded=lf.to_unbounded, seed=seed,
                             progress=progress, workers=workers if estimator_path is not None else 1)
-        out["emcee"] = table["rows"]["emcee"]
-        out["emcee"]["likelihood"] = est.likelihood_name
+        for name in routes:
+            if name != "amortized":
+                out[name] = table["rows"][name]
+                out[name]["likelihood"] = est.likelihood_name
+                log(f"  SBC {name} ({est.likelihood_name} likelihood): {headline(out[name])}; converged "
+                    f"{out[name]['converged_share']:.2f}")
         out["route_table"] = {"drones": int(k), "default": table["default"],
                               "rows": {n: _row(r) for n, r in table["rows"].items()}}
-        log(f"  SBC emcee ({est.likelihood_name} likelihood): {headline(out['emcee'])}; converged "
-            f"{out['emcee']['converged_share']:.2f}")
         log(f"  route table on {k} drones: default route {table['default']}")
     return out
+
+
+def sampled_routes(est: AmortizedEstimator) -> tuple[str, ...]:
+    """The routes a route table compares for this file: all of them where it has a summary
+    likelihood; the amortized and emcee routes on the likelihood ratio otherwise."""
+    from .amortized.estimator import ROUTES
+
+    return ROUTES if est.summary is not None else ("amortized", "emcee")
 
 
 class Route:
     """A route of an estimator file as an SBC ``draw(profiles, n, seed) -> (q draws,
     converged)`` that pickles (the file is read once per process): 'amortized' (exact
-    draws) or 'emcee' (nlopt + emcee on the file's likelihood, started from the
+    draws), 'emcee' (nlopt + emcee on the file's likelihood, started from the
     amortized draws resampled by importance weight where the likelihood is the summary
-    one, as :func:`.amortized.calibrate.calibrate_amortized` runs it)."""
+    one) or 'smc' (tempered SMC from the amortized posterior to the same posterior), as
+    :func:`.amortized.calibrate.calibrate_amortized` runs them."""
 
     _cache: dict = {}
 
@@ -204,6 +216,14 @@ class Route:
         if self.name == "amortized":
             u, _ = est.sample_u(y, n, s, strict=False)
             return lf.from_unbounded(u), True
+        if self.name == "smc":
+            from .amortized.tempered import n_particles, sample_tempered
+
+            u, _ = est.sample_u(y, n_particles(self.settings, lf.dim), s, strict=False)
+            run = sample_tempered(est.target(y), lambda v: est.log_prob_u(v, y), u, self.settings, s)
+            draws = run.draws()
+            pick = np.random.default_rng(s).choice(len(draws), size=n, replace=False)
+            return lf.from_unbounded(draws[pick]), run.converged
         u, _ = est.sample_u(y, 1000, s, strict=False)
         log_q = est.log_prob_u(u, y) if est.summary is not None else None
         run, _ = sample(est.target(y), u, self.settings, s, log_q=log_q)
@@ -213,7 +233,7 @@ class Route:
 
 
 def specimen_table(est: AmortizedEstimator, n: int, *, settings=None, seed: int = 0, workers: int = 1,
-                   estimator_path=None, progress=None) -> dict:
+                   estimator_path=None, progress=None, routes=None) -> dict:
     """Both routes on n drones drawn as the study draws new drones (the specimen model
     around the class reference, 5 measurements each): where users' drones are, not
     the prior's. Rows as the route table's (their 'outer share' and coverage are not
@@ -227,7 +247,7 @@ def specimen_table(est: AmortizedEstimator, n: int, *, settings=None, seed: int 
     vectors, profiles = sbc_data(replace(est.spec, near_width=1.0), n, seed, workers)
     truths = lf.quantities(vectors)
     rows = {}
-    for name in ("amortized", "emcee"):
+    for name in routes or sampled_routes(est):
         route = Route(name, est if estimator_path is None else estimator_path, settings)
         rows[name] = _row(run(route, truths, profiles, lf.names, seed=seed, to_unbounded=lf.to_unbounded,
                               progress=progress, desc=f"specimens {name}",

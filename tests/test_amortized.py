@@ -551,3 +551,53 @@ def test_routes_over_a_file_pickle_and_run_in_workers_as_in_one_process(tiny):
     one = run(route, truths, y, lf.names, n_rank=19, seed=4)
     two = run(Route("amortized", path), truths, y, lf.names, n_rank=19, seed=4, workers=2)
     assert one["ranks"] == two["ranks"]  # drone i's draws depend on seed + i only
+
+
+def test_tempered_smc_from_a_wide_proposal_weighs_distant_modes_right():
+    """Two modes 0.3 / 0.7, 6 sd apart: SMC from a broad q gives each its weight and
+    width, where walkers started in one mode would stay there."""
+    from scipy.stats import multivariate_normal as mvn
+
+    from mdaug.inference.amortized.tempered import sample_tempered
+    from mdaug.inference.settings import CalibrationSettings
+
+    a, b = np.array([-3.0, 0.0]), np.array([3.0, 1.0])
+
+    class Bimodal:
+        def __call__(self, u):
+            u = np.atleast_2d(u)
+            lp = np.logaddexp(np.log(0.3) + mvn(a, 0.25).logpdf(u), np.log(0.7) + mvn(b, 0.25).logpdf(u))
+            return np.where(np.all(np.abs(u) < 10, axis=1), lp, -np.inf)
+
+    q = mvn([0.0, 0.0], 16.0)
+    start = q.rvs(1000, random_state=np.random.default_rng(1))
+    run = sample_tempered(Bimodal(), q.logpdf, start, CalibrationSettings(progress=False), 3)
+    d = run.draws()
+    right = d[:, 0] > 0
+    assert run.converged and d.shape == (1000, 2)
+    assert right.mean() == pytest.approx(0.7, abs=0.06)
+    assert d[right].mean(0) == pytest.approx(b, abs=0.1) and d[~right].mean(0) == pytest.approx(a, abs=0.15)
+    assert d[right].std(0) == pytest.approx([0.5, 0.5], rel=0.15)
+    with pytest.raises(ValueError, match="even number"):
+        sample_tempered(Bimodal(), q.logpdf, start[:5], CalibrationSettings(progress=False), 3)
+
+
+def test_smc_route_on_the_summary_likelihood_reports_its_run_and_status(tiny):
+    from mdaug.inference.amortized.calibrate import calibrate_amortized
+    from mdaug.inference.result.status import calibration_status
+    from mdaug.inference.settings import CalibrationSettings
+
+    est, _ = tiny
+    _, y = simulate(est.spec, 1, 21)
+    settings = CalibrationSettings(time_budget=20, progress=False).with_plugin("smc", n_particles=200)
+    res = calibrate_amortized(y[0], "HELI", acquisition=est.spec.acquisition, estimator=est, route="smc",
+                              settings=settings, random_state=2, check=True)
+    d = res.diagnostics
+    assert d["route"] == "smc" and d["smc"]["likelihood"] == "summary" and d["smc"]["particles"] == 200
+    assert set(d["smc"]["crb"]) == set(est.label_free.names) and "emcee" not in d
+    assert "other_route" in res.idata.groups()  # the check: the amortized draws beside
+    status = calibration_status(res)
+    assert status.route == "smc" and status.route_words.startswith("tempered SMC from the amortized posterior on")
+    assert status.headline.startswith("smc route: ")
+    assert "tempered SMC from the amortized posterior on the summary likelihood (the route used): 200 particles" \
+        in res.report()

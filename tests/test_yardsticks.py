@@ -110,3 +110,38 @@ def test_the_widening_recovers_a_log_linear_scale_of_chi_square_gaps():
     assert w["intercept"] == pytest.approx(0.4, abs=0.05)
     assert w["slope"][0] == pytest.approx(0.6, abs=0.05)
     assert abs(w["slope"][1]) < 0.05 and abs(w["slope"][2]) < 0.05
+
+
+def test_the_widening_recovers_an_edge_widening_and_the_file_keeps_it():
+    """Gaps that grow towards the prior's edges (log w quadratic in u) are recovered,
+    and model.widen evaluates the fitted terms as fitted."""
+    from types import SimpleNamespace
+
+    from mdaug.inference.emulator.model import SummaryModel
+    from mdaug.inference.emulator.train import fit_widening
+
+    rng = np.random.default_rng(5)
+    u = rng.normal(size=(4000, 2))
+    t = (u - u.mean(0)) / u.std(0)
+    true_logw = 0.3 + 0.5 * t[:, 1] ** 2
+    gaps = np.exp(true_logw) * rng.chisquare(8, size=len(u))
+    w = fit_widening(u, gaps, 8)
+    assert w["quadratic"][1] == pytest.approx(0.5, abs=0.06)
+    assert abs(w["quadratic"][0]) < 0.06 and abs(w["slope"][0]) < 0.06
+    assert w["intercept"] == pytest.approx(0.3, abs=0.08)
+    model = SummaryModel.__new__(SummaryModel)
+    model.widening, model.label_free = w, SimpleNamespace(dim=2)
+    got = np.log(model.widen(u[:50]))
+    assert got == pytest.approx(np.clip(true_logw[:50], 0, 5), abs=0.15)
+    assert "quadratic" not in fit_widening(u, gaps, 8, quadratic=False)
+
+
+def test_nearest_drones_are_the_nearest_in_whitened_units():
+    from mdaug.inference.emulator.train import nearest_drones
+
+    z_train = np.array([[0.0, 0.0], [1.0, 0.0], [5.0, 5.0], [0.0, 2.0]])
+    u_train = np.arange(4.0)[:, None] * [1.0, 10.0]
+    got = nearest_drones(z_train, u_train, np.array([[0.9, 0.1], [4.0, 4.0]]), 2)
+    assert got.shape == (2, 2, 2)
+    assert got[0, :, 0].tolist() == [1.0, 0.0] and got[1, :, 0].tolist() == [2.0, 3.0]
+    assert nearest_drones(z_train, u_train, np.zeros((3, 2)), 0).shape == (3, 0, 2)

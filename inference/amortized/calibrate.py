@@ -1,14 +1,18 @@
 """calibrate_amortized(): measured profiles of one drone -> a CalibrationResult, with no
 training: the class's trained estimator (:mod:`.shipped` or a file).
 
-Two routes, each judged by the SBC and the route table stored in the estimator: the
-amortized posterior (draws in milliseconds), and nlopt + emcee on the file's
-likelihood (:mod:`.mcmc`; the summary likelihood of :mod:`mdaug.inference.emulator`
-where the file has one, started from the amortized draws resampled by importance
-weight). ``route`` None takes the file's default route (the best log score among the
-routes that pass SBC); the other route runs only when asked (``check=True``) and
-lands in the group ``other_route`` beside it, with its diagnostics in the metadata. Both are in the class-vector variables of
-every mdaug posterior (Gamma, A_a, ..., C_m per engine, phases marginalised).
+Three routes (:data:`.estimator.ROUTES`), each judged by the SBC and the route table
+stored in the estimator: the amortized posterior (draws in milliseconds); nlopt +
+emcee on the file's likelihood (:mod:`.mcmc`; the summary likelihood of
+:mod:`mdaug.inference.emulator` where the file has one, started from the amortized
+draws resampled by importance weight); and tempered SMC from the amortized posterior
+to the same likelihood's posterior (:mod:`.tempered`: weights between the modes that
+emcee's walkers do not cross). ``route`` None takes the file's default route (the best
+log score among the routes that pass SBC); with ``check=True`` one other route runs
+too (emcee beside the amortized route, the amortized draws beside a sampled one) and
+lands in the group ``other_route``, with its diagnostics in the metadata. All are in
+the class-vector variables of every mdaug posterior (Gamma, A_a, ..., C_m per engine,
+phases marginalised).
 
 Out of range: when the amortized posterior leaks (under half the share of draws inside
 the prior that it keeps on its own SBC drones) or the
@@ -44,8 +48,9 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
     """Calibrate one drone (module doc). estimator: an :class:`.estimator.AmortizedEstimator`,
     a path, or None (the shipped one for the class and acquisition); settings: the
     :class:`~mdaug.inference.settings.CalibrationSettings` of the emcee route (its
-    time budget, 50-tau rule, progress); route: 'amortized', 'emcee' or None (the
-    estimator's default route); check: also run the other route, as a check."""
+    time budget, 50-tau rule, progress; the SMC plugin's knobs for the smc route); route:
+    one of :data:`.estimator.ROUTES` or None (the estimator's default route); check:
+    also run another route, as a check (module doc)."""
     from ..settings import CalibrationSettings
     from .estimator import AmortizedEstimator, EstimatorError
     from .mcmc import sample
@@ -57,7 +62,7 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
     settings = settings if settings is not None else CalibrationSettings()
     est = estimator if isinstance(estimator, AmortizedEstimator) else find(ref.name, acquisition, radar, path=estimator)
     route = est.default_route if route is None else route
-    run_emcee = route == "emcee" or check
+    sampled = route if route != "amortized" else ("emcee" if check else None)  # the sampler that runs
     data, shifts = prepare_measured(profiles, radar, "peak", what=f"{source} of class {ref.name}")
     est.check_data(data, acquisition, radar, source)
     lf = est.label_free
@@ -69,44 +74,56 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
         raise EstimatorError(f"{source}: {exc}") from None
     t_amortized = time.perf_counter() - t0
     x_amortized, _ = lf.vectors(lf.from_unbounded(u))
-    diag = {"sampler": "amortized" if route == "amortized" else "emcee", "route": route,
+    diag = {"sampler": "amortized" if route == "amortized" else route, "route": route,
             "amortized_seconds": t_amortized, "amortized_inside_prior": float(inside),
             "estimator": _estimator_info(est)}
-    x_emcee = None
-    if run_emcee:
+    x_sampled = None
+    if sampled:
         from threadpoolctl import threadpool_limits
 
         with threadpool_limits(settings.threads):
             post = est.target(data)
-            start = u[:1000]
-            log_q = est.log_prob_u(start, data) if est.summary is not None else None
-            run, fit = sample(post, start, settings, child_seed(ss, "emcee"), log_q=log_q)
-        x_emcee = post.vectors(run.draws())
+            if sampled == "smc":
+                from .tempered import n_particles, sample_tempered
+
+                start, _ = est.sample_u(data, n_particles(settings, lf.dim), child_seed(ss, "smc-start"), strict=False)
+                run = sample_tempered(post, lambda v: est.log_prob_u(v, data), start, settings, child_seed(ss, "smc"))
+                fit = {}
+            else:
+                start = u[:1000]
+                log_q = est.log_prob_u(start, data) if est.summary is not None else None
+                run, fit = sample(post, start, settings, child_seed(ss, "emcee"), log_q=log_q)
+        x_sampled = post.vectors(run.draws())
         names = post.label_free.names
-        diag["emcee"] = {"converged": bool(run.converged), "reason": run.reason, "seconds": float(run.seconds),
-                         "likelihood": est.likelihood_name,
-                         "tau_max": float(run.tau.max()), "steps": int(run.n_steps),
-                         "steps_over_tau": float(run.n_steps / run.tau.max()),
-                         "acceptance_mean": float(run.acceptance.mean()), "n_walkers": int(run.chain.shape[1]),
-                         "ess_min": float(run.ess.min()), "rhat_max": _rhat(run, names), "fit": fit,
-                         "evaluations": int(post.n_calls)}
-        diag.update({k: diag["emcee"][k] for k in ("n_walkers", "steps_over_tau", "ess_min", "acceptance_mean",
-                                                    "tau_max")}, chain_steps=diag["emcee"]["steps"])
+        info = {"converged": bool(run.converged), "reason": run.reason, "seconds": float(run.seconds),
+                "likelihood": est.likelihood_name, "evaluations": int(post.n_calls)}
+        if sampled == "smc":
+            info.update(particles=int(run.chain.shape[1]), stages=int(run.extra["stages"]),
+                        acceptance_last=float(run.acceptance.mean()),
+                        unique_share=float(run.extra["smc_unique_share"]), log_evidence=float(run.extra["smc_log_z"]))
+        else:
+            info.update(tau_max=float(run.tau.max()), steps=int(run.n_steps),
+                        steps_over_tau=float(run.n_steps / run.tau.max()),
+                        acceptance_mean=float(run.acceptance.mean()), n_walkers=int(run.chain.shape[1]),
+                        ess_min=float(run.ess.min()), rhat_max=_rhat(run, names), fit=fit)
+            diag.update({k: info[k] for k in ("n_walkers", "steps_over_tau", "ess_min", "acceptance_mean",
+                                              "tau_max")}, chain_steps=info["steps"])
         if est.summary is not None:
-            diag["emcee"]["crb"] = _crb(post, np.median(run.draws(), axis=0))
+            info["crb"] = _crb(post, np.median(run.draws(), axis=0))
+        diag[sampled] = info
     diag["seconds"] = time.perf_counter() - t0
     typical = est.meta.get("sbc", {}).get("amortized", {}).get("inside_prior_share", 1.0)
-    diag["out_of_range"], diag["out_of_range_why"] = _out_of_range(lf, x_amortized, x_emcee, inside, typical)
-    chosen = x_amortized if route == "amortized" else x_emcee
-    diag["widths"] = _widths(lf, chosen, diag.get("emcee", {}).get("crb", {}) if route == "emcee" else {})
+    diag["out_of_range"], diag["out_of_range_why"] = _out_of_range(lf, x_amortized, x_sampled, inside, typical)
+    chosen = x_amortized if route == "amortized" else x_sampled
+    diag["widths"] = _widths(lf, chosen, diag.get(route, {}).get("crb", {}) if route != "amortized" else {})
     if route == "amortized":
         diag.update(converged=True, reason="amortized posterior: exact draws from the trained estimator "
                     f"(SBC in the estimator file: {_sbc_line(est, 'amortized')})")
     else:
-        diag.update(converged=diag["emcee"]["converged"], reason=diag["emcee"]["reason"])
+        diag.update(converged=diag[route]["converged"], reason=diag[route]["reason"])
     if diag["out_of_range"]:
         warnings.warn(f"{source}: {diag['out_of_range_why']}", stacklevel=2)
-    other = None if not check else (x_emcee if route == "amortized" else x_amortized)
+    other = None if not check else (x_sampled if route == "amortized" else x_amortized)
     return _result(ref, est, data, shifts, chosen, other, diag, n_draws)
 
 
@@ -162,14 +179,14 @@ def _rhat(run, names) -> float:
     return float(np.nanmax(r["x"].values))
 
 
-def _out_of_range(lf, x_amortized, x_emcee, inside: float, typical: float) -> tuple[bool, str]:
+def _out_of_range(lf, x_amortized, x_sampled, inside: float, typical: float) -> tuple[bool, str]:
     """typical: the share of draws inside the prior on the estimator's own SBC drones."""
     if inside < LEAK_FACTOR * typical:
         return True, (f"only {inside:.0%} of the amortized posterior's draws fall inside the prior (on simulated "
                       f"drones {typical:.0%}): the measurements are unlike the estimator's training set")
-    if x_emcee is None:
+    if x_sampled is None:
         return False, ""
-    qa, qe = lf.quantities(x_amortized), lf.quantities(x_emcee)
+    qa, qe = lf.quantities(x_amortized), lf.quantities(x_sampled)
     lo, hi = np.quantile(qa, [0.01, 0.99], axis=0)
     med = np.median(qe, axis=0)
     off = (med < lo) | (med > hi)
@@ -215,7 +232,7 @@ def _result(ref, est, data, shifts, chosen, other, diag, n_draws) -> Calibration
             "radar": est.spec.radar.to_dict(), "acquisition": est.spec.acquisition.to_dict(),
             "likelihood": {"likelihood": _likelihood_words(est, diag["route"])},
             "marginal": True, "amortized": True,
-            "fit": diag.get("emcee", {}).get("fit", {}), "best_fit": median.tolist(),
+            "fit": diag.get(diag["route"], {}).get("fit", {}), "best_fit": median.tolist(),
             "recentred_shifts": np.asarray(shifts).tolist(), "diagnostics": diag,
             "noise_model": "learned from the scene simulator (every nuisance drawn as a measurement draws it)"}
     idata.posterior.attrs["mdaug"] = json.dumps(meta, default=float)

@@ -32,9 +32,10 @@ FORMAT = "mdaug-estimator-1"
 MEMBERS = ("meta.json", "posterior.pt", "ratio.pt")
 SUMMARY_MEMBER = "summary.pt"
 """Optional member: the summary likelihood's weights (with meta field 'summary')."""
-ROUTES = ("amortized", "emcee")
-"""The routes of a calibration: the amortized posterior's exact draws, or nlopt +
-emcee on the file's likelihood (the summary likelihood where the file has one)."""
+ROUTES = ("amortized", "emcee", "smc")
+"""The routes of a calibration: the amortized posterior's exact draws, nlopt + emcee on
+the file's likelihood (the summary likelihood where the file has one), or tempered
+SMC from the amortized posterior to that likelihood's posterior (:mod:`.tempered`)."""
 META_FIELDS = ("format", "spec", "prior", "net", "n_simulations", "label_free", "training", "sbc", "seed")
 
 

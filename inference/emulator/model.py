@@ -13,8 +13,8 @@ error (a small network :class:`.net.ErrorNet` fitted by maximum likelihood to th
 emulator's residuals on held-out simulated drones, net of the noise in its targets:
 the emulator is worse where training drones were sparse), c >= 1 an inflation chosen
 on other held-out drones so that the chi-square of the truth's residual has its
-expected median (stated in the file: ``inflation``), times a widening w(u) >= 1 (a
-log-linear function of u, ``widening``) fitted so that twice the gap between the
+expected median (stated in the file: ``inflation``), times a widening w(u) >= 1 (log w
+linear and quadratic in u, ``widening``) fitted so that twice the gap between the
 likelihood's maximum and its value at the truth is the chi-square of d degrees of
 freedom that an honest likelihood gives (Wilks): where the emulator's error is
 smooth in u the truth's residual looks right while the maximum moves away from the
@@ -101,7 +101,10 @@ class SummaryModel:
             return np.ones(len(u))
         w = self.widening
         t = (u - np.asarray(w["centre"])) / np.asarray(w["scale"])
-        return np.exp(np.clip(w["intercept"] + t @ np.asarray(w["slope"]), 0.0, 5.0))
+        log_w = w["intercept"] + t @ np.asarray(w["slope"])
+        if "quadratic" in w:
+            log_w = log_w + (t * t) @ np.asarray(w["quadratic"])
+        return np.exp(np.clip(log_w, 0.0, 5.0))
 
     def summarise(self, profiles: np.ndarray) -> np.ndarray:
         """(D,) whitened mean folded log-profile of measurements (M, L)."""
@@ -168,6 +171,10 @@ def to_parts(model: SummaryModel, report: dict | None = None) -> tuple[dict, dic
     return meta, state
 
 
+WIDENING_KEYS = ("centre", "intercept", "scale", "slope")
+"""The widening's fields in a file; ``quadratic`` (d numbers) may follow them."""
+
+
 def from_parts(meta: dict, state: dict, class_name: str, acquisition: Acquisition, radar: RadarConfig,
                label_free, src: str) -> SummaryModel:
     """The model of :func:`to_parts`' output; ValueError naming ``src`` and the field
@@ -181,13 +188,15 @@ def from_parts(meta: dict, state: dict, class_name: str, acquisition: Acquisitio
     widening = meta.get("widening")
     if widening is not None:
         d = label_free.dim
-        ok = isinstance(widening, dict) and sorted(widening) == ["centre", "intercept", "scale", "slope"]
+        keys = sorted(widening) if isinstance(widening, dict) else []
+        lists = ("centre", "scale", "slope") + (("quadratic",) if "quadratic" in keys else ())
+        ok = keys in (sorted(WIDENING_KEYS), sorted(WIDENING_KEYS + ("quadratic",)))
         ok = ok and _finite(widening["intercept"]) and all(
             isinstance(widening[k], list) and len(widening[k]) == d and all(_finite(v) for v in widening[k])
-            for k in ("centre", "scale", "slope"))
+            for k in lists)
         if not ok or not all(v > 0 for v in widening["scale"]):
             raise ValueError(f"{src}: meta.json field 'summary.widening' must hold a finite intercept and {d} finite "
-                             "numbers each of centre, scale (> 0) and slope")
+                             "numbers each of centre, scale (> 0), slope and (optionally) quadratic")
     nets = {}
     for key, cls_, prefix in (("net", Emulator, "net."), ("cov_net", CovarianceNet, "cov."),
                               ("error_net", ErrorNet, "error.")):

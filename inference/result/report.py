@@ -88,6 +88,14 @@ def amortized_report(res, identified_ratio: float) -> str:
                      f"({m['seconds']:.1f} s), max tau {m['tau_max']:.0f} steps, chain/tau {m['steps_over_tau']:.1f}, "
                      f"min ESS {m['ess_min']:.0f}, R-hat max {m['rhat_max']:.3f}, acceptance {m['acceptance_mean']:.2f}: "
                      + "{}: {}".format(*chain_words(m["converged"], m["reason"])))
+    if "smc" in d:
+        m = d["smc"]
+        which = {"summary": "the summary likelihood", "ratio": "the learned likelihood ratio"}.get(
+            m.get("likelihood", "ratio"), "the learned likelihood")
+        lines.append(f"tempered SMC from the amortized posterior on {which} (the route used): "
+                     f"{m['particles']} particles, {m['stages']} stages ({m['seconds']:.1f} s), unique share "
+                     f"{m['unique_share']:.2f}, last acceptance {m['acceptance_last']:.2f}: "
+                     + "{}: {}".format(*chain_words(m["converged"], m["reason"])))
     lines.append(f"posterior used by the strategies: {d['route']} route")
     lines += calibration_status(res).lines()
     if d.get("widths"):

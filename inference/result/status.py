@@ -8,8 +8,10 @@ The facts and their words:
 
 * **route**: ``amortized`` (the estimator's exact draws), ``emcee`` (nlopt + emcee on
   the estimator's learned likelihood: its summary likelihood or its likelihood ratio,
-  ``diagnostics['emcee']['likelihood']``) or ``likelihood`` (``--method likelihood``:
-  the closed-form route, sampled by emcee, SMC or a Laplace approximation);
+  ``diagnostics['emcee']['likelihood']``), ``smc`` (tempered SMC from the amortized
+  posterior to the same learned likelihood's posterior, ``diagnostics['smc']``) or
+  ``likelihood`` (``--method likelihood``: the closed-form route, sampled by emcee, SMC
+  or a Laplace approximation);
 * **convergence**: ``converged`` or ``NOT converged`` for a chain (emcee, SMC, Laplace);
   ``exact draws`` for the amortized route, which has no chain;
 * **honesty**, by the one gate, :func:`honest` (here; the route table of
@@ -62,7 +64,7 @@ class CalibrationStatus:
     words every place prints (module doc)."""
 
     route: str
-    """'amortized', 'emcee' or 'likelihood'."""
+    """'amortized', 'emcee', 'smc' or 'likelihood'."""
     route_words: str
     """How the posterior was drawn, e.g. "nlopt + emcee on the estimator's summary likelihood"."""
     converged: bool
@@ -183,8 +185,9 @@ def calibration_status(source) -> CalibrationStatus:
         if "emcee" in d:
             check = ("emcee", *chain_words(bool(d["emcee"].get("converged")), d["emcee"].get("reason", "")))
     else:
-        m = d.get("emcee", {})
-        words = f"nlopt + emcee on {_LIKELIHOODS.get(m.get('likelihood', 'ratio'), 'the learned likelihood')}"
+        m = d.get(route, {})
+        how = "tempered SMC from the amortized posterior" if route == "smc" else "nlopt + emcee"
+        words = f"{how} on {_LIKELIHOODS.get(m.get('likelihood', 'ratio'), 'the learned likelihood')}"
         convergence, detail = chain_words(bool(d["converged"]), d.get("reason", ""))
     sbc = ((d.get("estimator") or {}).get("sbc") or {}).get(route) if amortized else None
     if sbc and sbc.get("outer_share") is not None and sbc.get("coverage90_range"):

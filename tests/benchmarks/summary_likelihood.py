@@ -3,6 +3,8 @@
 python tests/benchmarks/summary_likelihood.py --class HELI --ramps 32 --prior DIR --near DIR \
     [--model PREFIX | --save-model PREFIX] [--route-truths 40] [--specimens 20] [--time-budget 60] \
     [--workers 2] [--seed 7] --out FILE
+python tests/benchmarks/summary_likelihood.py --class HELI --ramps 32 --from-file FILE [...] --out FILE2
+   (the route table of a file that already carries its summary likelihood)
 
 1. The training drones: --prior, shards of prior drones with 10 measurements each
    (``simulate_shards`` of ``SimulationSpec(CLASS, K)``, e.g. a train-estimator work
@@ -12,7 +14,7 @@ python tests/benchmarks/summary_likelihood.py --class HELI --ramps 32 --prior DI
 2. The summary likelihood (``mdaug.inference.emulator.train.train_summary_model``),
    or one trained before (--model PREFIX: PREFIX.json + PREFIX.pt as --save-model
    wrote them), attached to the shipped estimator of the class and K.
-3. The route table: both routes on --route-truths fresh prior drones (SBC: outer
+3. The route table: every route (or --routes) on --route-truths fresh prior drones (SBC: outer
    share, coverage, log score, widths, seconds, convergence) and on --specimens drones
    drawn as the study draws new drones (widths, truth inside, log score, and the
    Cramer-Rao bound); the file's default route is the best log score among the routes
@@ -62,8 +64,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--class", dest="cls", required=True)
     ap.add_argument("--ramps", type=int, required=True)
-    ap.add_argument("--prior", required=True)
-    ap.add_argument("--near", required=True)
+    ap.add_argument("--prior")
+    ap.add_argument("--near")
+    ap.add_argument("--from-file", default=None)
     ap.add_argument("--model", default=None)
     ap.add_argument("--save-model", default=None)
     ap.add_argument("--route-truths", type=int, default=40)
@@ -71,13 +74,20 @@ def main(argv=None) -> int:
     ap.add_argument("--time-budget", type=float, default=60.0)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--routes", default=None, help="comma-separated routes to compare (default: all the file has)")
     ap.add_argument("--out", required=True)
     a = ap.parse_args(argv)
     torch.set_num_threads(1)
     t0 = time.perf_counter()
-    est = find(a.cls, Acquisition.measured(a.ramps))
+    est = find(a.cls, Acquisition.measured(a.ramps), path=a.from_file)
     lf = est.label_free
-    if a.model:
+    if a.from_file:
+        if est.summary is None:
+            ap.error(f"--from-file {a.from_file}: the file carries no summary likelihood")
+        model, report = est.summary, est.meta["summary"]["training"]
+    elif not (a.prior and a.near):
+        ap.error("--prior and --near are needed unless --from-file is given")
+    elif a.model:
         meta = json.load(open(f"{a.model}.json"))
         model = from_parts(meta, torch.load(f"{a.model}.pt", weights_only=True), a.cls, est.spec.acquisition,
                            est.spec.radar, lf, a.model)
@@ -103,18 +113,26 @@ def main(argv=None) -> int:
     est.with_summary(model, report)
     est.save(a.out)  # the routes read the file in their worker processes
     settings = CalibrationSettings(progress=False, time_budget=a.time_budget)
-    sbc = estimator_sbc(est, a.route_truths, seed=a.seed, workers=a.workers, mcmc_truths=a.route_truths,
-                        mcmc_settings=settings, estimator_path=a.out, log=print)
-    spec = specimen_table(est, a.specimens, settings=settings, seed=a.seed + 1, workers=a.workers,
-                          estimator_path=a.out)
     names = lf.names[:8]
-    print(f"\nroute table, {a.route_truths} fresh prior drones (SBC), {a.cls} K = {a.ramps}, 5 measurements:")
-    print(table(sbc["route_table"]["rows"], names))
-    print(f"\n{a.specimens} drones drawn as the study draws new drones (specimen model around the reference):")
-    print(table(spec["rows"], names, spec.get("crb_width_over_truth")))
-    keep = {k: v for k, v in est.meta.get("sbc", {}).items() if k == "amortized" or k == "n_measurements"}
-    est.meta["sbc"] = {**keep, "route_table": sbc["route_table"], "emcee": sbc["emcee"], "specimens": spec}
-    default = sbc["route_table"]["default"] or "amortized"
+    routes = tuple(a.routes.split(",")) if a.routes else None
+    old = est.meta.get("sbc", {})
+    # with --from-file the file's model is unchanged: a part not rerun here is kept
+    keep = ("amortized", "n_measurements") + (("route_table", "emcee", "specimens") if a.from_file else ())
+    new = {k: v for k, v in old.items() if k in keep}
+    if a.route_truths:
+        sbc = estimator_sbc(est, a.route_truths, seed=a.seed, workers=a.workers, mcmc_truths=a.route_truths,
+                            mcmc_settings=settings, estimator_path=a.out, log=print, routes=routes)
+        new.update(route_table=sbc["route_table"], emcee=sbc["emcee"])
+        print(f"\nroute table, {a.route_truths} fresh prior drones (SBC), {a.cls} K = {a.ramps}, 5 measurements:")
+        print(table(sbc["route_table"]["rows"], names))
+    if a.specimens:
+        spec = specimen_table(est, a.specimens, settings=settings, seed=a.seed + 1, workers=a.workers,
+                              estimator_path=a.out, routes=routes)
+        new["specimens"] = spec
+        print(f"\n{a.specimens} drones drawn as the study draws new drones (specimen model around the reference):")
+        print(table(spec["rows"], names, spec.get("crb_width_over_truth")))
+    est.meta["sbc"] = new
+    default = (new.get("route_table") or {}).get("default") or "amortized"
     est.meta["default_route"] = default
     est.save(a.out)
     print(f"\ndefault route: {default}; wrote {a.out} ({time.perf_counter() - t0:.0f} s)")
