@@ -220,7 +220,8 @@ class Route:
             from .amortized.tempered import n_particles, sample_tempered
 
             u, _ = est.sample_u(y, n_particles(self.settings, lf.dim), s, strict=False)
-            run = sample_tempered(est.target(y), lambda v: est.log_prob_u(v, y), u, self.settings, s)
+            post = est.target(y, plug_in=np.median(u, axis=0))
+            run = sample_tempered(post, lambda v: est.log_prob_u(v, y), u, self.settings, s)
             draws = run.draws()
             pick = np.random.default_rng(s).choice(len(draws), size=n, replace=False)
             return lf.from_unbounded(draws[pick]), run.converged

@@ -601,3 +601,26 @@ def test_smc_route_on_the_summary_likelihood_reports_its_run_and_status(tiny):
     assert status.headline.startswith("smc route: ")
     assert "tempered SMC from the amortized posterior on the summary likelihood (the route used): 200 particles" \
         in res.report()
+
+
+def test_a_plugged_in_covariance_is_held_for_every_u(tiny):
+    """With plug_in, the likelihood is the Gaussian of mu(u) under the one covariance at
+    the plug-in point: differences between two u are half their chi-square differences
+    under it, and at the plug-in point it equals the u-dependent likelihood."""
+    from mdaug.inference.emulator.posterior import EmulatedPosterior
+
+    est, _ = tiny
+    lf, model = est.label_free, est.summary
+    _, y = simulate(est.spec, 1, 33)
+    u = lf.to_unbounded(lf.quantities(est.spec.space().vectors(est.spec.space().sample_prior(
+        3, np.random.default_rng(9)))))
+    held = EmulatedPosterior(model, y[0], plug_in=u[0])
+    free = EmulatedPosterior(model, y[0])
+    assert held.log_likelihood(u[:1]) == pytest.approx(free.log_likelihood(u[:1]), rel=1e-9, abs=1e-9)
+    _, cov = model.moments(u[:1], len(y[0]))
+    r = model.mean(u) - held.z
+    chi = np.einsum("ni,ij,nj->n", r, np.linalg.inv(cov[0]), r)
+    ll = held.log_likelihood(u)
+    assert ll[1] - ll[2] == pytest.approx(-0.5 * (chi[1] - chi[2]), rel=1e-6, abs=1e-8)
+    with pytest.raises(ValueError, match=f"plug_in must hold {lf.dim} coordinates"):
+        EmulatedPosterior(model, y[0], plug_in=u[0][:2])

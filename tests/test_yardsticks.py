@@ -145,3 +145,16 @@ def test_nearest_drones_are_the_nearest_in_whitened_units():
     assert got.shape == (2, 2, 2)
     assert got[0, :, 0].tolist() == [1.0, 0.0] and got[1, :, 0].tolist() == [2.0, 3.0]
     assert nearest_drones(z_train, u_train, np.zeros((3, 2)), 0).shape == (3, 0, 2)
+
+
+def test_the_default_route_passes_on_the_prior_and_is_sharpest_where_users_are():
+    from mdaug.inference.diagnostics.routes import default_route
+
+    def row(outer, cov_lo, ls):
+        return {"outer_share": outer, "coverage90_range": [cov_lo, 0.95], "log_score": ls}
+
+    prior = {"amortized": row(0.11, 0.86, 9.0), "smc": row(0.10, 0.85, 11.0), "emcee": row(0.31, 0.60, 40.0)}
+    users = {"amortized": row(0.0, 1.0, 6.8), "smc": row(0.0, 1.0, 4.0), "emcee": row(0.03, 0.9, -1.0)}
+    assert default_route(prior) == "amortized"  # the prior drones' log score alone
+    assert default_route(prior, users) == "smc"  # emcee is sharper still, but fails the gate
+    assert default_route({"emcee": prior["emcee"]}, users) is None

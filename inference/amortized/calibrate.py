@@ -82,14 +82,15 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
         from threadpoolctl import threadpool_limits
 
         with threadpool_limits(settings.threads):
-            post = est.target(data)
             if sampled == "smc":
                 from .tempered import n_particles, sample_tempered
 
+                post = est.target(data, plug_in=np.median(u, axis=0))
                 start, _ = est.sample_u(data, n_particles(settings, lf.dim), child_seed(ss, "smc-start"), strict=False)
                 run = sample_tempered(post, lambda v: est.log_prob_u(v, data), start, settings, child_seed(ss, "smc"))
                 fit = {}
             else:
+                post = est.target(data)
                 start = u[:1000]
                 log_q = est.log_prob_u(start, data) if est.summary is not None else None
                 run, fit = sample(post, start, settings, child_seed(ss, "emcee"), log_q=log_q)

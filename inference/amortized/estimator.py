@@ -79,14 +79,16 @@ class AmortizedEstimator:
         """The emcee route's likelihood: 'summary' (the file has one) or 'ratio'."""
         return "ratio" if self.summary is None else "summary"
 
-    def target(self, profiles: np.ndarray):
-        """The emcee route's target for these measurements (M, L): the summary
-        likelihood's posterior where the file has one, else the ratio network's; both
-        vectorised callables u (W, d) -> (W,) with ``dim``, ``label_free``, ``vectors``."""
+    def target(self, profiles: np.ndarray, plug_in: np.ndarray | None = None):
+        """The sampled routes' target for these measurements (M, L): the summary
+        likelihood's posterior where the file has one (its covariance held at u =
+        ``plug_in`` when given, :class:`~mdaug.inference.emulator.posterior.EmulatedPosterior`),
+        else the ratio network's; both vectorised callables u (W, d) -> (W,) with ``dim``,
+        ``label_free``, ``vectors``."""
         if self.summary is not None:
             from ..emulator.posterior import EmulatedPosterior
 
-            return EmulatedPosterior(self.summary, profiles)
+            return EmulatedPosterior(self.summary, profiles, plug_in)
         from .mcmc import LearnedPosterior
 
         return LearnedPosterior(self, profiles)

@@ -122,12 +122,23 @@ def route_table(routes: dict, truths_q: np.ndarray, data, names: list[str], *, t
                 seed: int = 0, progress=None, workers: int = 1) -> dict:
     """Every route (name -> draw(profiles, n, seed) -> (q draws (n, d), converged)) on
     the same drones; returns {"rows": {name: summary}, "default": name or None}: the
-    best (lowest) log score among the routes that pass the gate (None when none does)."""
+    best (lowest) log score among the routes that pass the gate (None when none does;
+    :func:`default_route`)."""
     rows = {}
     for name, draw in routes.items():
         rows[name] = run(draw, truths_q, data, names, n_rank=n_rank, seed=seed, to_unbounded=to_unbounded,
                          progress=progress, desc=f"SBC {name}", workers=workers)
         rows[name]["verdict"] = verdict(rows[name])
+    return {"rows": rows, "default": default_route(rows)}
+
+
+def default_route(rows: dict, specimen_rows: dict | None = None) -> str | None:
+    """The route a file runs by default: among the routes that pass the gate on fresh
+    prior drones (``rows``, the route table's SBC rows), the best (lowest) log score of the
+    truth on drones like a user's where ``specimen_rows`` (the same routes on drones of
+    the specimen model around the class reference) are given, else on the SBC drones;
+    None when no route passes."""
     passing = [n for n, r in rows.items() if honest(r)]
-    default = min(passing, key=lambda n: rows[n]["log_score"]) if passing else None
-    return {"rows": rows, "default": default}
+    judge = rows if specimen_rows is None else specimen_rows
+    passing = [n for n in passing if n in judge]
+    return min(passing, key=lambda n: judge[n]["log_score"]) if passing else None
