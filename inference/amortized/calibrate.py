@@ -7,8 +7,8 @@ emcee on the file's likelihood (:mod:`.mcmc`; the summary likelihood of
 :mod:`mdaug.inference.emulator` where the file has one, started from the amortized
 draws resampled by importance weight); and tempered SMC from the amortized posterior
 to the same likelihood's posterior (:mod:`.tempered`: weights between the modes that
-emcee's walkers do not cross). ``route`` None takes the file's default route (the best
-log score among the routes that pass SBC); with ``check=True`` one other route runs
+emcee's walkers do not cross). ``route`` None takes the file's default route (named
+by its route table, :func:`mdaug.inference.diagnostics.routes.default_route`); with ``check=True`` one other route runs
 too (emcee beside the amortized route, the amortized draws beside a sampled one) and
 lands in the group ``other_route``, with its diagnostics in the metadata. All are in
 the class-vector variables of every mdaug posterior (Gamma, A_a, ..., C_m per engine,
