@@ -99,7 +99,7 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
         info = {"converged": bool(run.converged), "reason": run.reason, "seconds": float(run.seconds),
                 "likelihood": est.likelihood_name, "evaluations": int(post.n_calls)}
         if sampled == "smc":
-            info.update(particles=int(run.chain.shape[1]), stages=int(run.extra["stages"]),
+            info.update(particles=int(run.chain.shape[1]), stages=int(run.extra["smc_stages"]),
                         acceptance_last=float(run.acceptance.mean()),
                         unique_share=float(run.extra["smc_unique_share"]), log_evidence=float(run.extra["smc_log_z"]))
         else:

@@ -26,7 +26,7 @@ import numpy as np
 
 from ...radar.seeds import seed_sequence
 from ..samplers.base import SamplerRun
-from ..samplers.smc import smc_diagnostics
+from ..samplers.smc import sampler_run
 from ..samplers.tempering import run_smc
 
 
@@ -73,10 +73,4 @@ def sample_tempered(post, log_q, u_start: np.ndarray, settings, seed, *, ess: fl
     res = run_smc(target, lambda k, rng: u_start, len(u_start), seed, ess_target=ess, p_move=p_move,
                   max_sweeps=max_sweeps, max_stages=own.max_stages, progress=settings.progress,
                   time_budget=settings.time_budget)
-    n = len(u_start)
-    ess = float(res.ess[-1]) if res.ess.size else float(n)
-    acc = float(res.acceptance[-1]) if res.acceptance.size else 1.0
-    return SamplerRun(chain=res.particles[None], log_prob=(res.log_lik + res.log_prior)[None],
-                      tau=np.full(u_start.shape[1], n / ess), burn=0, thin=1, acceptance=np.full(n, acc),
-                      converged=res.converged, reason=res.reason, seconds=res.seconds, store_every=1, sampler="smc",
-                      extra={**smc_diagnostics(res), "stages": int(len(res.betas) - 1)})
+    return sampler_run(res)

@@ -33,6 +33,8 @@ from .net import CovarianceNet, Emulator, ErrorNet
 from .sketch import sketch
 from .summary import Whitening
 
+LOG_2PI = float(np.log(2 * np.pi))
+
 
 @dataclass
 class SummaryModel:
@@ -88,6 +90,16 @@ class SummaryModel:
         mean, w, ab = self.nets(u)
         cov = self.covariance_from(w, ab, n_measurements)
         return mean, cov * self.widen(u)[:, None, None] if widen else cov
+
+    def log_likelihood(self, u: np.ndarray, z_bar: np.ndarray, n_measurements: int,
+                       widen: bool = True) -> np.ndarray:
+        """log N(z_bar; mu(u), Sigma_n(u)): (N,) for u (N, d) and the whitened mean z_bar
+        (D,) of n measurements (the widening left out with ``widen=False``)."""
+        mean, cov = self.moments(u, n_measurements, widen=widen)
+        chol = np.linalg.cholesky(cov)
+        w = np.linalg.solve(chol, (mean - z_bar)[..., None])[..., 0]
+        logdet = np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(1)
+        return -0.5 * len(z_bar) * LOG_2PI - logdet - 0.5 * (w * w).sum(1)
 
     def covariance_from(self, within: np.ndarray, ab: np.ndarray, n_measurements: int) -> np.ndarray:
         """c (W (1 / n + a) + b I) (module doc) from W (N, D, D) and (a, b) (N, 2)."""

@@ -180,10 +180,7 @@ def likelihood_gaps(model: SummaryModel, u: np.ndarray, z_bar: np.ndarray, n_mea
     starts = np.zeros((len(u), 0, u.shape[1])) if starts is None else np.asarray(starts, float)
     for i, (ui, zi) in enumerate(zip(u, z_bar)):
         def loglik(t, grad, zi=zi):
-            mean, cov = model.moments(t[None], n_measurements, widen=False)
-            c = np.linalg.cholesky(cov[0])
-            y = np.linalg.solve(c, mean[0] - zi)
-            v = -np.log(np.diag(c)).sum() - 0.5 * y @ y
+            v = model.log_likelihood(t[None], zi, n_measurements, widen=False)[0]
             return float(v) if np.isfinite(v) else -1e12
 
         pts = np.concatenate([ui[None], starts[i]])

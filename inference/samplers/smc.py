@@ -95,14 +95,20 @@ class SMCSampler:
                       p_redraw=own.redraw, modes=modes, p_jump=own.jump,
                       relabel=layout.random_relabel if layout.labelled else None, p_relabel=settings.relabel, backend_path=backend_path,
                       fp=fingerprint, progress=settings.progress, time_budget=settings.time_budget)
-        ess = float(smc.ess[-1]) if smc.ess.size else float(n)
-        acc = float(smc.acceptance[-1]) if smc.acceptance.size else 1.0
-        # the N particles as one stored step; tau = N / ESS (ESS: the weight ESS of the last
-        # reweighting: the particles are equally weighted afterwards but share ancestors)
-        return SamplerRun(chain=smc.particles[None], log_prob=(smc.log_lik + smc.log_prior)[None],
-                          tau=np.full(layout.dim, n / ess), burn=0, thin=1, acceptance=np.full(n, acc),
-                          converged=smc.converged, reason=smc.reason, seconds=smc.seconds,
-                          resumed_at=smc.resumed_at, store_every=1, sampler="smc", extra=smc_diagnostics(smc))
+        return sampler_run(smc)
+
+
+def sampler_run(smc: SMCResult) -> SamplerRun:
+    """The SMC run as every sampler returns it: the N particles as one stored step; tau =
+    N / ESS (ESS: the weight ESS of the last reweighting: the particles are equally
+    weighted afterwards but share ancestors); the diagnostics of :func:`smc_diagnostics`."""
+    n, dim = smc.particles.shape
+    ess = float(smc.ess[-1]) if smc.ess.size else float(n)
+    acc = float(smc.acceptance[-1]) if smc.acceptance.size else 1.0
+    return SamplerRun(chain=smc.particles[None], log_prob=(smc.log_lik + smc.log_prior)[None],
+                      tau=np.full(dim, n / ess), burn=0, thin=1, acceptance=np.full(n, acc),
+                      converged=smc.converged, reason=smc.reason, seconds=smc.seconds,
+                      resumed_at=smc.resumed_at, store_every=1, sampler="smc", extra=smc_diagnostics(smc))
 
 
 def smc_diagnostics(smc: SMCResult) -> dict:

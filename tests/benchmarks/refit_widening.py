@@ -43,10 +43,7 @@ def _gap(args):
     u, _ = est.sample_u(y, 2000, seed, strict=False)
     lp = lf.log_prior_u(u)
     u, lp = u[np.isfinite(lp)], lp[np.isfinite(lp)]
-    mean, cov = model.moments(u, len(y), widen=False)
-    c = np.linalg.cholesky(cov)
-    w = np.linalg.solve(c, (mean - z)[..., None])[..., 0]
-    ll = -np.log(np.diagonal(c, axis1=1, axis2=2)).sum(1) - 0.5 * (w * w).sum(1)
+    ll = model.log_likelihood(u, z, len(y), widen=False)
     iw = ll + lp - est.log_prob_u(u, y)
     starts = np.concatenate([u[np.argsort(iw)[::-1][:4]], u[np.argsort(ll)[::-1][:2]]])
     return float(likelihood_gaps(model, ut[None], z[None], len(y), max_eval=500, starts=starts[None])[0])
