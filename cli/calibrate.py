@@ -258,7 +258,7 @@ def _interrupted(args) -> str:
 def add_calibrate(sub, parents, help):
     from ..inference.settings import FIT_ALGORITHMS, SAMPLERS, CalibrationSettings
     from ..inference.amortized.estimator import ROUTES
-    from .calibrate_amortized import EMCEE_BUDGET
+    from .calibrate_amortized import ROUTE_BUDGET
     from ..radar.profiles import NORMALISATIONS
 
     d, q = CalibrationSettings(), CalibrationSettings.quick()
@@ -267,9 +267,9 @@ def add_calibrate(sub, parents, help):
                  description="Calibrate a class's vibration model from a few measurements of one drone. "
                              "Measured acquisitions (random phases): the class's trained estimator, by its "
                              "default route (the file's route table: the best log score among the routes that "
-                             "pass SBC): nlopt + emcee to 50 autocorrelation times on the summary likelihood, "
-                             "started from the amortized posterior's draws, where the estimator has one; else the "
-                             "amortized posterior's exact draws. The published single chirp: the closed-form "
+                             "pass SBC, measured on drones like a user's): tempered SMC from the amortized "
+                             "posterior to the summary likelihood's posterior where the estimator's table names it; "
+                             "else the amortized posterior's exact draws. The published single chirp: the closed-form "
                              "likelihood (nlopt, then emcee or --sampler smc/laplace). Exit status 3 when the "
                              "sampler did not converge (the posterior is still written, flagged).")
     p.add_argument("measured", type=Path, help="measured profiles (NPZ, CSV or .mat with profiles and labels)")
@@ -296,19 +296,19 @@ def add_calibrate(sub, parents, help):
     g = p.add_argument_group("method")
     g.add_argument("--method", choices=("auto", "amortized", "likelihood"), default="auto",
                    help="amortized: the class's trained estimator (simulation-based; the amortized posterior, "
-                        "and nlopt + emcee on the likelihood learned from the same simulations); likelihood: "
+                        "and tempered SMC to the likelihood learned from the same simulations); likelihood: "
                         "the closed-form likelihood with nlopt + a sampler (auto: amortized for measured "
                         "acquisitions, likelihood for the published single chirp) (default: %(default)s)")
     g.add_argument("--estimator", type=Path, default=None,
                    help="estimator ZIP of mdaug train-estimator (default: the shipped one for the class and K)")
     g.add_argument("--route", choices=ROUTES, default=None,
-                   help="amortized: the estimator's posterior (exact draws, milliseconds); emcee: nlopt + emcee "
-                        "on the estimator's likelihood (the summary likelihood where it has one); smc: tempered "
-                        "SMC from the amortized posterior to that likelihood's posterior (weights between its "
-                        "modes) (default: the estimator's default route)")
+                   help="amortized: the estimator's posterior (exact draws, milliseconds); smc: tempered SMC "
+                        "from the amortized posterior to the posterior of the estimator's likelihood (the summary "
+                        "likelihood where it has one; weights between its modes) (default: the estimator's "
+                        "default route)")
     g.add_argument("--check-route", action="store_true",
-                   help="also run another route and keep its draws beside the posterior, as a check: emcee "
-                        "beside the amortized route, the amortized draws beside a sampled one (default: only "
+                   help="also run another route and keep its draws beside the posterior, as a check: smc "
+                        "beside the amortized route, the amortized draws beside the smc route's (default: only "
                         "the route used runs)")
     g = p.add_argument_group("budget and sampler")
     g.add_argument("--quick", action="store_true",
@@ -320,8 +320,8 @@ def add_calibrate(sub, parents, help):
                         f"(default: {d.sampler})")
     g.add_argument("--time-budget", type=positive_float, default=None, metavar="SECONDS",
                    help="stop sampling after this many seconds when not converged before (the run is then "
-                        f"flagged not converged; rerun to continue) (default: {d.time_budget:g}; the emcee route "
-                        f"and smc routes of a trained estimator: {EMCEE_BUDGET:g})")
+                        f"flagged not converged; rerun to continue) (default: {d.time_budget:g}; the smc route "
+                        f"of a trained estimator: {ROUTE_BUDGET:g})")
     g.add_argument("--max-steps", type=positive_int, default=None, metavar="N",
                    help=f"emcee step budget, steps per walker (default: {_cap(d_emcee.max_steps)}; --quick: "
                         f"{_cap(q_emcee.max_steps)})")

@@ -1,18 +1,18 @@
 """``mdaug calibrate`` by the trained estimator (the amortized calibration): which
-method a command line asks for, the emcee route's settings, and the report of one
+method a command line asks for, the smc route's settings, and the report of one
 drone's run (the run itself: :func:`mdaug.inference.amortized.calibrate.calibrate_amortized`,
 called by the verb)."""
 from __future__ import annotations
 
 from .common import EXIT_NOT_CONVERGED, result, warn
 
-EMCEE_BUDGET = 180.0
-"""Default seconds of the emcee route (``--time-budget``): a HELI chain reaches 50 tau in
-about a minute on one free core, a QUAD chain in two to three."""
+ROUTE_BUDGET = 180.0
+"""Default most seconds of the smc route (``--time-budget``): a HELI K = 32 run on the
+summary likelihood takes 5-17 s on one core."""
 
 
 CLOSED_FORM_ONLY = ("likelihood", "draws", "ramps_drawn", "fit_budget", "fit_algorithm", "starts", "normalisation",
-                    "particles", "backend", "engines", "trace")
+                    "particles", "backend", "engines", "trace", "max_steps", "walkers")
 """Options of the likelihood route only (the amortized route has no such knob)."""
 
 
@@ -30,7 +30,7 @@ def calibration_method(args, acquisition) -> str:
                              "phases per frame); the published single chirp at fixed phases needs --method "
                              "likelihood")
         given = [o for o in CLOSED_FORM_ONLY if getattr(args, o, None) not in (None, False)]
-        if args.sampler not in (None, "emcee"):
+        if args.sampler is not None:
             given.insert(0, "sampler")
         if args.no_range_offset:
             given.append("no_range_offset")
@@ -47,8 +47,8 @@ def calibration_method(args, acquisition) -> str:
 
 
 def amortized_settings(args, settings):
-    """The sampled routes' settings (emcee, smc): EMCEE_BUDGET seconds unless ``--time-budget`` says otherwise."""
-    return settings.replace(time_budget=EMCEE_BUDGET) if args.time_budget is None else settings
+    """The smc route's settings: ROUTE_BUDGET seconds unless ``--time-budget`` says otherwise."""
+    return settings.replace(time_budget=ROUTE_BUDGET) if args.time_budget is None else settings
 
 
 def warn_several_drones(args, drones, cls) -> None:
@@ -75,8 +75,8 @@ def report_amortized(args, res, drones, caught) -> int:
         warn("calibrate", f"the chain did not converge ({res.diagnostics['reason']}); {args.out} is flagged "
                           "not converged")
         return 0 if args.allow_unconverged else EXIT_NOT_CONVERGED
-    emcee = res.diagnostics.get("emcee", {})
-    if emcee and not emcee.get("converged") and res.diagnostics.get("route") == "amortized":
-        warn("calibrate", f"the emcee route, run as a check, did not converge ({emcee.get('reason')}); the "
+    smc = res.diagnostics.get("smc", {})
+    if smc and not smc.get("converged") and res.diagnostics.get("route") == "amortized":
+        warn("calibrate", f"the smc route, run as a check, did not converge ({smc.get('reason')}); the "
                           "posterior used is the amortized one")
     return 0

@@ -50,7 +50,7 @@ def run_population(args, profiles, drones, settings, acquisition, method: str = 
     """Each drone calibrated on its own (kept beside OUT, reused by a rerun on the same
     data with the same options: :func:`reuse_key`), then the class's population
     (:func:`mdaug.inference.population.result.calibrate_population`). ``method``
-    "amortized": each drone's posterior is the trained estimator's (no emcee route:
+    "amortized": each drone's posterior is the trained estimator's (no smc route:
     the population uses the amortized draws), else the closed-form route."""
     import json
 

@@ -22,7 +22,7 @@ _meas = count(1, MAX_MEASUREMENTS, f"an integer from 1 to {MAX_MEASUREMENTS} (me
 
 
 SBC_MEASUREMENTS = 5     # measurements of each SBC drone (inference.estimator_job.SBC_MEASUREMENTS)
-EMCEE_SBC_SECONDS = 1200.0  # the emcee route's seconds per SBC drone of train-estimator (the calibration default)
+ROUTE_SBC_SECONDS = 180.0  # the smc route's most seconds per SBC drone of train-estimator (calibrate's default)
 
 
 def check_estimator_sizes(args) -> None:
@@ -36,11 +36,11 @@ def check_estimator_sizes(args) -> None:
     profile = RadarConfig().slice_length * 4  # float32
     training = args.verb == "train-estimator"
     truths_name = "--sbc-truths" if training else "--truths"
-    emcee_name = "--sbc-emcee-truths" if training else "--emcee-truths"
-    truths, emcee = (args.sbc_truths, args.sbc_emcee_truths) if training else (args.truths, args.emcee_truths)
-    if emcee > truths:
-        raise ValueError(f"{emcee_name} {emcee:,} exceeds {truths_name} {truths:,}: the emcee route is checked on "
-                         f"the first {emcee_name} of the {truths_name} drones")
+    route_name = "--sbc-route-truths" if training else "--route-truths"
+    truths, routes = (args.sbc_truths, args.sbc_route_truths) if training else (args.truths, args.route_truths)
+    if routes > truths:
+        raise ValueError(f"{route_name} {routes:,} exceeds {truths_name} {truths:,}: the routes are compared on "
+                         f"the first {route_name} of the {truths_name} drones")
     if training:
         sims, meas = ("--simulations", args.simulations, 20000), ("--measurements", args.measurements, 10)
         check_size(sims, meas, bytes_each=2 * profile, what="simulated profiles in memory")
@@ -50,13 +50,19 @@ def check_estimator_sizes(args) -> None:
     n = (truths_name, truths, 300)
     check_size(n, bytes_each=SBC_MEASUREMENTS * profile + 2 * 13 * 4 * 8, what="SBC drones' profiles and vectors")
     check_size(n, k, seconds_each=SBC_MEASUREMENTS * SECONDS_SIMULATED_RAMP, what="simulated ramps of SBC drones")
-    budget = EMCEE_SBC_SECONDS if training else args.time_budget
+    budget = ROUTE_SBC_SECONDS if training else args.time_budget
+    spec_name = "--sbc-specimens" if training else "--specimens"
+    specimens = (args.sbc_specimens if training else args.specimens) if routes else 0
     if training:
-        check_size((emcee_name, emcee, 10), seconds_each=budget,
-                   what=f"SBC drones through the emcee route, {budget / 60:.0f} min each")
+        check_size((route_name, routes, 10), seconds_each=budget,
+                   what=f"SBC drones through the smc route, at most {budget / 60:.0f} min each")
+        check_size((spec_name, specimens, 50), seconds_each=budget,
+                   what=f"specimen drones through the smc route, at most {budget / 60:.0f} min each")
     else:
-        check_size((emcee_name, emcee, 10), ("--time-budget", budget, 60), seconds_each=1.0,
-                   what="seconds of the emcee route")
+        check_size((route_name, routes, 10), ("--time-budget", budget, 60), seconds_each=1.0,
+                   what="seconds of the smc route")
+        check_size((spec_name, specimens, 50), ("--time-budget", budget, 60), seconds_each=1.0,
+                   what="seconds of the smc route on specimen drones")
 
 
 def _interrupted(args) -> str:
@@ -117,7 +123,8 @@ def run_train(args) -> int:
         est = train_estimator(spec, args.simulations, work, args.out, seed=args.seed, workers=args.workers,
                               device=args.device, net_cfg=default_nets(cls), train_cfg=cfg,
                               post_budget=args.posterior_budget, ratio_budget=args.ratio_budget,
-                              sbc_truths=args.sbc_truths, sbc_mcmc_truths=args.sbc_emcee_truths,
+                              sbc_truths=args.sbc_truths, sbc_route_truths=args.sbc_route_truths,
+                              sbc_specimens=args.sbc_specimens,
                               summary=not args.no_summary, near_simulations=args.near_simulations,
                               summary_cfg=_summary_config(args),
                               command=_command(args, cls, cfg.max_epochs),
@@ -179,15 +186,25 @@ def run_sbc(args) -> int:
     est.check_acquisition(Acquisition.measured(args.ramps), RadarConfig(),  # calibrate's own check of its data
                           f"--ramps {args.ramps} with {where}")
     settings = CalibrationSettings(progress=False, time_budget=args.time_budget)
-    out = estimator_sbc(est, args.truths, seed=args.seed, workers=args.workers, mcmc_truths=args.emcee_truths,
-                        mcmc_settings=settings, progress=progress_enabled(), log=info)
+    out = estimator_sbc(est, args.truths, seed=args.seed, workers=args.workers, route_truths=args.route_truths,
+                        route_settings=settings, progress=progress_enabled(), log=info,
+                        specimens=args.specimens if args.route_truths else 0)
     for route, s in out.items():
-        if not isinstance(s, dict):
+        if not isinstance(s, dict) or "coverage90_range" not in s:  # the route table's own record
             continue
         result(f"{cls} K={args.ramps} {route}: {headline(s)}")
-        widths = " ".join(f"{k.split()[2][0]}{k.split()[1]}{k[-3:]} {v:.2f}/{s['prior_width_over_truth'][k]:.2f}"
+        prior = s.get("prior_width_over_truth")  # the amortized route's SBC carries the prior's beside
+        widths = " ".join(f"{k.split()[2][0]}{k.split()[1]}{k[-3:]} {v:.2f}" + (f"/{prior[k]:.2f}" if prior else "")
                           for k, v in s["width_over_truth"].items() if k.startswith("line"))
-        result(f"  median 90% width / truth (posterior/prior): {widths}")
+        result(f"  median 90% width / truth{' (posterior/prior)' if prior else ''}: {widths}")
+    if "specimens" in out:
+        for route, s in out["specimens"]["rows"].items():
+            widths = " ".join(f"{v:.2f}" for k, v in s["width_over_truth"].items() if k.startswith("line"))
+            result(f"{cls} K={args.ramps} {route} on {out['specimens']['drones']} specimen drones: log score "
+                   f"{s['log_score']:.2f}, lines' median 90% width / truth {widths}")
+    if "route_table" in out:
+        t = out["route_table"]
+        result(f"{cls} K={args.ramps} default route: {t['default']} ({t['default_by']})")
     if args.figure is not None:
         from ..inference.diagnostics.sbc_figure import sbc_figure
 
@@ -230,11 +247,15 @@ def add_train(sub, parents, help):
                    help="training seconds of the likelihood network (default: none)")
     p.add_argument("--sbc-truths", type=nonneg_int, default=300, metavar="N",
                    help="SBC drones of the amortized route (default: %(default)s; 0: none)")
-    p.add_argument("--sbc-emcee-truths", type=nonneg_int, default=0, metavar="N",
-                   help="SBC drones of the emcee route, on which both routes form the route table that names "
+    p.add_argument("--sbc-route-truths", type=nonneg_int, default=0, metavar="N",
+                   help="SBC drones of the smc route, on which both routes form the route table that names "
                         "the file's default route (default: %(default)s: no table, the amortized route)")
+    p.add_argument("--sbc-specimens", type=nonneg_int, default=50, metavar="N",
+                   help="with --sbc-route-truths: drones like a user's (the specimen model around the class "
+                        "reference) through both routes; the default route is the best log score on them among "
+                        "the routes that pass the gate (default: %(default)s; 0: judged on the prior drones)")
     p.add_argument("--no-summary", action="store_true",
-                   help="no summary likelihood (the emcee route then uses the likelihood ratio network)")
+                   help="no summary likelihood (the smc route then uses the likelihood ratio network)")
     p.add_argument("--near-simulations", type=count(0, MAX_SIMULATIONS), default=None, metavar="N",
                    help="drones simulated near the class reference (the specimen model at 4 x its spreads) for "
                         "the summary likelihood, beside the prior's (default: half of --simulations)")
@@ -255,10 +276,14 @@ def add_sbc(sub, parents, help):
     p.add_argument("--estimator", type=Path, default=None, help="estimator ZIP (default: the shipped one)")
     p.add_argument("--truths", type=positive_int, default=300, metavar="N",
                    help="fresh simulated drones, 5 measurements each (default: %(default)s)")
-    p.add_argument("--emcee-truths", type=nonneg_int, default=0, metavar="N",
-                   help="of those, how many also through nlopt + emcee on the learned likelihood (default: %(default)s)")
+    p.add_argument("--route-truths", type=nonneg_int, default=0, metavar="N",
+                   help="of those, how many also through the smc route (tempered SMC from the amortized posterior "
+                        "to the learned likelihood's posterior), for the route table (default: %(default)s)")
+    p.add_argument("--specimens", type=nonneg_int, default=0, metavar="N",
+                   help="with --route-truths: also both routes on N drones like a user's (the specimen model "
+                        "around the class reference), which name the default route (default: %(default)s)")
     p.add_argument("--time-budget", type=positive_float, default=60.0, metavar="SECONDS",
-                   help="emcee seconds per drone (default: %(default)s)")
+                   help="smc route seconds per drone (default: %(default)s)")
     p.add_argument("--workers", type=positive_int, default=1, metavar="N",
                    help="simulation processes (default: %(default)s)")
     p.add_argument("--seed", type=seed_int, default=1, help="seed of the SBC drones (default: %(default)s)")

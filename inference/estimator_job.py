@@ -56,7 +56,8 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
                     device: str = "auto", net_cfg: NetConfig = NetConfig(), train_cfg: TrainConfig = TrainConfig(),
                     post_budget: float | None = None, ratio_budget: float | None = None,
                     sim_budget: float | None = None,
-                    sbc_truths: int = 300, sbc_mcmc_truths: int = 0, mcmc_settings=None, shard_size: int = 500,
+                    sbc_truths: int = 300, sbc_route_truths: int = 0, route_settings=None, sbc_specimens: int = 50,
+                    shard_size: int = 500,
                     summary: bool = True, near_simulations: int | None = None, near_width: float = NEAR_WIDTH,
                     summary_cfg=None, command: str | None = None, progress=None, log=print) -> AmortizedEstimator:
     """The whole job (module doc); writes the estimator to ``out`` and returns it.
@@ -102,7 +103,8 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
     est.save(out)  # usable now; rewritten with its SBC figures below
     if sbc_truths:
         est.meta["sbc"] = estimator_sbc(est, sbc_truths, seed=child_seed(seed, "sbc"), workers=workers,
-                                        mcmc_truths=sbc_mcmc_truths, mcmc_settings=mcmc_settings, estimator_path=out,
+                                        route_truths=sbc_route_truths, route_settings=route_settings,
+                                        specimens=sbc_specimens if sbc_route_truths else 0, estimator_path=out,
                                         progress=progress, log=log)
         est.meta["default_route"] = (est.meta["sbc"].get("route_table") or {}).get("default") or "amortized"
     est.meta["job_seconds"] = time.perf_counter() - t0
@@ -127,12 +129,15 @@ def sbc_data(spec: SimulationSpec, n: int, seed, workers: int = 1):
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
 
-def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, workers: int = 1, mcmc_truths: int = 0,
-                  mcmc_settings=None, estimator_path=None, progress=None, log=print, routes=None) -> dict:
+def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, workers: int = 1, route_truths: int = 0,
+                  route_settings=None, estimator_path=None, progress=None, log=print, routes=None,
+                  specimens: int = 0, specimen_seed=None) -> dict:
     """SBC of the amortized route on n_truths fresh drones (5 measurements each), and
     the route table of ``routes`` (default :func:`sampled_routes`) on the first
-    ``mcmc_truths`` of them (in ``workers`` processes when ``estimator_path``, the
-    estimator's file, is given)."""
+    ``route_truths`` of them (in ``workers`` processes when ``estimator_path``, the
+    estimator's file, is given), with the same routes on ``specimens`` drones like a
+    user's (:func:`specimen_table`, seeded by ``specimen_seed``, default a child of
+    ``seed``); the table's default route by :func:`name_default_route`."""
     lf = est.label_free
     vectors, profiles = sbc_data(est.spec, n_truths, seed, workers)
     truths = lf.quantities(vectors)
@@ -151,12 +156,12 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
                                 to_unbounded=lf.to_unbounded, progress=progress, desc="SBC amortized")}
     out["amortized"]["inside_prior_share"] = float(np.mean(accepted))
     log(f"  SBC amortized: {headline(out['amortized'])}; draws inside the prior {np.mean(accepted):.3f}")
-    if mcmc_truths:
+    if route_truths:
         from .diagnostics.routes import route_table
         from .settings import CalibrationSettings
 
-        settings = mcmc_settings or CalibrationSettings(progress=False)
-        k = min(mcmc_truths, n_truths)
+        settings = route_settings or CalibrationSettings(progress=False)
+        k = min(route_truths, n_truths)
         routes = {name: Route(name, est if estimator_path is None else estimator_path, settings)
                   for name in (routes or sampled_routes(est))}
         table = route_table(routes, truths[:k], profiles[:k], lf.names, to_unbounded=lf.to_unbounded, seed=seed,
@@ -169,25 +174,43 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
                     f"{out[name]['converged_share']:.2f}")
         out["route_table"] = {"drones": int(k), "default": table["default"],
                               "rows": {n: _row(r) for n, r in table["rows"].items()}}
-        log(f"  route table on {k} drones: default route {table['default']}")
+        if specimens:
+            out["specimens"] = specimen_table(est, specimens, settings=settings, seed=child_seed(seed, "specimens") if specimen_seed is None else specimen_seed,
+                                              workers=workers, estimator_path=estimator_path, progress=progress,
+                                              routes=tuple(routes))
+        name_default_route(out)
+        log(f"  route table on {k} drones: default route {out['route_table']['default']} "
+            f"({out['route_table']['default_by']})")
     return out
 
 
+def name_default_route(sbc: dict) -> None:
+    """Name the default route of an estimator's SBC record (in place): among the routes
+    that pass the gate on the route table's prior drones, the best log score on its
+    specimen drones where it has them (drones like a user's), else on the prior drones
+    (:func:`mdaug.inference.diagnostics.routes.default_route`); 'amortized' when none passes."""
+    from .diagnostics.routes import default_route
+
+    table, spec = sbc["route_table"], sbc.get("specimens")
+    best = default_route(table["rows"], spec["rows"] if spec else None)
+    table["default"] = best or "amortized"
+    table["default_by"] = (f"log score on {spec['drones']} specimen drones" if spec else
+                           f"log score on {table['drones']} prior drones") if best else "no route passes the gate"
+
+
 def sampled_routes(est: AmortizedEstimator) -> tuple[str, ...]:
-    """The routes a route table compares for this file: all of them where it has a summary
-    likelihood; the amortized and emcee routes on the likelihood ratio otherwise."""
+    """The routes a route table compares for this file: all of them (the smc route on
+    the summary likelihood where the file has one, on the likelihood ratio otherwise)."""
     from .amortized.estimator import ROUTES
 
-    return ROUTES if est.summary is not None else ("amortized", "emcee")
+    return ROUTES
 
 
 class Route:
     """A route of an estimator file as an SBC ``draw(profiles, n, seed) -> (q draws,
     converged)`` that pickles (the file is read once per process): 'amortized' (exact
-    draws), 'emcee' (nlopt + emcee on the file's likelihood, started from the
-    amortized draws resampled by importance weight where the likelihood is the summary
-    one) or 'smc' (tempered SMC from the amortized posterior to the same posterior), as
-    :func:`.amortized.calibrate.calibrate_amortized` runs them."""
+    draws) or 'smc' (tempered SMC from the amortized posterior to the posterior of the
+    file's likelihood), as :func:`.amortized.calibrate.calibrate_amortized` runs them."""
 
     _cache: dict = {}
 
@@ -210,26 +233,17 @@ class Route:
         return self._est
 
     def __call__(self, y, n, s):
-        from .amortized.mcmc import sample
+        from .amortized.tempered import n_particles, sample_tempered
 
         est, lf = self.est, self.est.label_free
         if self.name == "amortized":
             u, _ = est.sample_u(y, n, s, strict=False)
             return lf.from_unbounded(u), True
-        if self.name == "smc":
-            from .amortized.tempered import n_particles, sample_tempered
-
-            u, _ = est.sample_u(y, n_particles(self.settings, lf.dim), s, strict=False)
-            post = est.target(y, plug_in=np.median(u, axis=0))
-            run = sample_tempered(post, lambda v: est.log_prob_u(v, y), u, self.settings, s)
-            draws = run.draws()
-            pick = np.random.default_rng(s).choice(len(draws), size=n, replace=False)
-            return lf.from_unbounded(draws[pick]), run.converged
-        u, _ = est.sample_u(y, 1000, s, strict=False)
-        log_q = est.log_prob_u(u, y) if est.summary is not None else None
-        run, _ = sample(est.target(y), u, self.settings, s, log_q=log_q)
+        u, _ = est.sample_u(y, n_particles(self.settings, lf.dim), s, strict=False)
+        post = est.target(y, plug_in=np.median(u, axis=0))
+        run = sample_tempered(post, lambda v: est.log_prob_u(v, y), u, self.settings, s)
         draws = run.draws()
-        pick = np.linspace(0, len(draws) - 1, n).round().astype(int)
+        pick = np.random.default_rng(s).choice(len(draws), size=n, replace=len(draws) < n)
         return lf.from_unbounded(draws[pick]), run.converged
 
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from . import figures
 from .markup import Figures, Html, details, img, table, td
-from ..inference.result.status import OUT_OF_RANGE, calibration_status
+from ..inference.result.status import OUT_OF_RANGE, calibration_status, run_facts
 from .numbers import column_decimals, fmt
 from .verdicts import FAR, nuisances
 
@@ -101,22 +101,14 @@ def calibration_section(r: dict, figs: Figures, w: Html, report_dir: Path) -> st
         d = c["diagnostics"]
         st = calibration_status(c)
         k = f"calibration.{cls}.diagnostics"
-        sampler = d.get("sampler", "emcee")
+        run = run_facts(d, lambda key, value, dec: w.num(f"{k}.{key}", value, dec))
         if st.route == "amortized":
             chain = (f"{w.esc(st.route_words)} ({fmt(d.get('amortized_seconds', 0) * 1e3)} ms, "
                      f"{fmt(100 * d.get('amortized_inside_prior', 0))}% of its draws inside the prior)")
             if st.check:
-                chain += (f"; {w.esc(st.check)}, {fmt(d.get('n_walkers'))} walkers x {fmt(d.get('chain_steps'))} "
-                          f"steps (chain = {w.num(k + '.steps_over_tau', d.get('steps_over_tau'), 1)} x max tau)")
-        elif sampler == "smc":
-            chain = (f"{w.esc(st.route_words)}: {fmt(d.get('smc_n_particles'))} particles, "
-                     f"{fmt(d.get('smc_stages'))} stages")
+                chain += f"; {w.esc(st.check)}" + (f", {run}" if run else "")
         else:
-            chain = (f"{w.esc(st.route_words)}: {fmt(d.get('n_walkers'))} walkers x {fmt(d.get('chain_steps'))} "
-                     f"steps (chain = {w.num(k + '.steps_over_tau', d.get('steps_over_tau'), 1)} x max tau)")
-        if st.route != "amortized" or st.check:
-            chain += (f"; min ESS {w.num(k + '.ess_min', d.get('ess_min'), 0)}; acceptance "
-                      f"{w.num(k + '.acceptance_mean', d.get('acceptance_mean'), 2)}")
+            chain = w.esc(st.route_words) + (f": {run}" if run else "")
         out.append(f"<h3>{w.esc(cls)}: <span class='{'ok' if st.trusted else 'warn'}'>{w.esc(st.headline)}</span></h3>")
         detail = w.esc(st.convergence_detail)
         out.append(f"<ul><li><b>Convergence</b>: {w.esc(st.convergence)}{': ' + detail if detail else ''}.</li>"

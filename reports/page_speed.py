@@ -8,6 +8,7 @@ import numpy as np
 from .figures_speed import speed_figure
 from .markup import Figures, Html, details, table, td
 from .numbers import decimals, fmt, fmt_sig, spread
+from ..inference.result.status import run_facts
 
 INTRO = ("<p class='note'>Each stage's cost against its error, measured in this run on 1 thread: the "
          "generator f(x) (float32 against float64), the marginal likelihood (Monte Carlo error against the "
@@ -45,8 +46,8 @@ def speed_section(r: dict, j: dict, figs: Figures, w: Html) -> str:
         d = c["diagnostics"]
         k = f"calibration.{cls}.diagnostics"
         ess = d.get("ess_min")
-        chain = w.num(k + ".steps_over_tau", d.get("steps_over_tau"), 1)
-        rows.append([td("calibration", False), td(f"{w.esc(cls)}, chain = {chain} x max tau", False),
+        run = run_facts(d, lambda key, value, dec: w.num(f"{k}.{key}", value, dec)) or "exact draws, no sampler"
+        rows.append([td("calibration", False), td(f"{w.esc(cls)}, {run}", False),
                      td(f"{w.num(k + '.seconds', d.get('seconds'), 0)} s"),
                      td(fmt_sig(1 / np.sqrt(ess)) if ess else "–"),
                      td("Monte Carlo error of posterior means, in posterior sd (1/sqrt(min ESS))", False)])

@@ -29,7 +29,7 @@ from pathlib import Path
 
 from .finding import command, finding
 from .markup import Text
-from .numbers import column_decimals, fmt, spread
+from .numbers import column_decimals, spread
 from .page_strategies import choice_mark, setting_text
 from .verdicts import judge, label
 
@@ -149,24 +149,25 @@ def results_section(results: dict) -> str:
                      "–", *_cells(w, ceil_m, classes, d), label(v)]
             lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
-    cal = ["Calibration: " + "; ".join(_calibration_text(c, v, fmt) for c, v in results["calibration"].items()) + "."]
+    cal = ["Calibration: " + "; ".join(_calibration_text(c, v) for c, v in results["calibration"].items()) + "."]
     lines += cal + ["", END]
     return "\n".join(lines)
 
 
-def _calibration_text(cls: str, v: dict, fmt) -> str:
+def _calibration_text(cls: str, v: dict) -> str:
     """One class's calibration in a line: its status in the words of every other place
     (:func:`mdaug.inference.result.status.calibration_status`), the stored SBC, the
-    chain's length where there is one, and the route run as a check."""
-    from ..inference.result.status import calibration_status
+    sampled run where there is one (:func:`~mdaug.inference.result.status.run_facts`),
+    and the route run as a check."""
+    from ..inference.result.status import calibration_status, run_facts
 
-    d, st = v["diagnostics"], calibration_status(v)
-    chain = f"{fmt(d.get('steps_over_tau'), 1)} x max tau, min ESS {fmt(d.get('ess_min'), 0)}"
+    st = calibration_status(v)
+    facts = run_facts(v["diagnostics"])
     text = f"{cls} {st.headline}" + (f" ({st.sbc_facts})" if st.sbc else "")
     if st.route != "amortized":
-        text += f"; chain {chain}"
+        text += f"; {facts}" if facts else ""
     elif st.check:
-        text += f"; {st.check} ({chain})"
+        text += f"; {st.check}" + (f" ({facts})" if facts else "")
     return text
 
 

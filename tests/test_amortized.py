@@ -1,5 +1,5 @@
 """The amortized calibration: label-free target, networks, training, estimator files,
-SBC machinery (on a toy simulator whose posterior is known), the emcee route and
+SBC machinery (on a toy simulator whose posterior is known), the smc route and
 the calibrate verb. Tiny networks and budgets: seconds."""
 import json
 import zipfile
@@ -295,20 +295,24 @@ def test_training_resumes_from_its_checkpoint(tmp_path):
     assert more.resumed_at == 4 and more.epochs == 6 and len(more.history) == 6
 
 
-def test_emcee_route_on_the_learned_likelihood_stays_in_the_prior(tiny):
-    from mdaug.inference.amortized.mcmc import LearnedPosterior, sample
+def test_smc_route_on_the_ratio_network_stays_in_the_prior(tiny):
+    """A file without a summary likelihood: the smc route's target is the ratio network's
+    posterior, and its particles stay on the prior's support."""
+    from mdaug.inference.amortized.ratio_posterior import LearnedPosterior
+    from mdaug.inference.amortized.tempered import sample_tempered
     from mdaug.inference.settings import CalibrationSettings
 
     est, _ = tiny
     _, y = simulate(est.spec, 1, 9)
     u, _ = est.sample_u(y[0], 300, 1, strict=False)
     post = LearnedPosterior(est, y[0])
-    run, fit = sample(post, u, CalibrationSettings(check_every=50, max_steps=200, time_budget=20), 4)
+    run = sample_tempered(post, lambda v: est.log_prob_u(v, y[0]), u, CalibrationSettings(progress=False,
+                                                                                           time_budget=20), 4)
     s = run.draws()
-    assert s.shape[1] == post.dim == 8
+    assert s.shape == (300, post.dim) and post.dim == 8
     assert np.all(np.isfinite(post.label_free.log_prior_u(s)))
-    assert np.isfinite(fit["log_post"]) and fit["log_post"] >= fit["start_log_post"] - 1e-9
-    assert run.reason  # converged or says why not
+    assert post.n_calls > 300 and run.reason  # it moved the particles; converged or says why not
+    assert run.extra["smc_stages"] >= 1
 
 
 # ---- the calibrate verb ---------------------------------------------------------------------------
@@ -334,11 +338,11 @@ def test_calibrate_verb_writes_an_amortized_posterior(tiny, tmp_path, capsys):
     data = _profile_file(tmp_path / "heli.npz", y[0][:3])
     out = tmp_path / "post.nc"
     status = main(["calibrate", str(data), "--class", "HELI", "--out", str(out), "--estimator", str(path),
-                   "--max-steps", "200", "--time-budget", "20", "--seed", "5"])
+                   "--time-budget", "20", "--seed", "5"])
     text = capsys.readouterr()
     assert status == 0, text.err
     assert "posterior used by the strategies: amortized" in text.out
-    assert "emcee" not in text.out.split("posterior used")[0]  # the default route only: nothing ran beside it
+    assert "tempered SMC" not in text.out.split("posterior used")[0]  # the default route only: nothing ran beside it
     res = CalibrationResult.load(out, class_name="HELI")  # check_content: variables, dims, prior bounds
     assert res.amortized and res.marginal and res.n_measurements == 3
     assert res.draws().shape == (4000, 13)
@@ -346,10 +350,10 @@ def test_calibrate_verb_writes_an_amortized_posterior(tiny, tmp_path, capsys):
     assert res.acquisition.ramps == 4
     checked = tmp_path / "checked.nc"
     status = main(["calibrate", str(data), "--class", "HELI", "--out", str(checked), "--estimator", str(path),
-                   "--max-steps", "200", "--time-budget", "20", "--seed", "5", "--check-route"])
+                   "--time-budget", "20", "--seed", "5", "--check-route"])
     text = capsys.readouterr()
     assert status == 0, text.err
-    assert "nlopt + emcee on the summary likelihood (run as a check)" in text.out
+    assert "tempered SMC from the amortized posterior on the summary likelihood (run as a check)" in text.out
     assert "other_route" in CalibrationResult.load(checked, class_name="HELI").idata.groups()
 
 
@@ -405,9 +409,16 @@ def test_train_estimator_and_sbc_verbs(tmp_path, capsys, refused):
     assert "resumed at epoch 1" in capsys.readouterr().out
     js = tmp_path / "sbc.json"
     assert main(["sbc", "--class", "HELI", "--ramps", "4", "--estimator", str(out), "--truths", "3",
-                 "--json", str(js)]) == 0
+                 "--route-truths", "2", "--specimens", "2", "--time-budget", "5", "--json", str(js)]) == 0
+    text = capsys.readouterr().out
     data = json.loads(js.read_text(), parse_constant=lambda c: pytest.fail(f"non-strict JSON token {c}"))
-    assert data["amortized"]["n_replicates"] == 3
+    assert data["amortized"]["n_replicates"] == 3 and data["smc"]["n_replicates"] == 2
+    assert set(data["specimens"]["rows"]) == {"amortized", "smc"} and data["specimens"]["drones"] == 2
+    table = data["route_table"]
+    assert table["default"] in ("amortized", "smc") and table["default_by"] in (
+        "log score on 2 specimen drones", "no route passes the gate")
+    assert f"HELI K=4 default route: {table['default']} ({table['default_by']})" in text
+    assert "HELI K=4 smc on 2 specimen drones: log score" in text
     if not torch.cuda.is_available():
         empty = tmp_path / "empty"
         empty.mkdir()
@@ -519,22 +530,6 @@ def test_a_damaged_summary_likelihood_is_refused_by_field(tiny, tmp_path, name, 
         AmortizedEstimator.load(bad)
 
 
-def test_emcee_route_on_the_summary_likelihood_reports_its_likelihood_and_bound(tiny):
-    from mdaug.inference.amortized.calibrate import calibrate_amortized
-    from mdaug.inference.settings import CalibrationSettings
-
-    est, _ = tiny
-    _, y = simulate(est.spec, 1, 21)
-    res = calibrate_amortized(y[0], "HELI", acquisition=est.spec.acquisition, estimator=est, route="emcee",
-                              settings=CalibrationSettings(time_budget=5, check_every=50), random_state=2)
-    d = res.diagnostics
-    assert d["route"] == "emcee" and d["emcee"]["likelihood"] == "summary"
-    assert set(d["emcee"]["crb"]) == set(est.label_free.names)
-    assert all(v > 0 for v in d["emcee"]["crb"].values())
-    assert "other_route" not in res.idata.groups()  # the amortized route ran only to start the walkers
-    assert "summary likelihood" in res.meta["likelihood"]["likelihood"]
-
-
 def test_routes_over_a_file_pickle_and_run_in_workers_as_in_one_process(tiny):
     import pickle
 
@@ -594,7 +589,8 @@ def test_smc_route_on_the_summary_likelihood_reports_its_run_and_status(tiny):
                               settings=settings, random_state=2, check=True)
     d = res.diagnostics
     assert d["route"] == "smc" and d["smc"]["likelihood"] == "summary" and d["smc"]["particles"] == 200
-    assert set(d["smc"]["crb"]) == set(est.label_free.names) and "emcee" not in d
+    assert set(d["smc"]["crb"]) == set(est.label_free.names) and all(v > 0 for v in d["smc"]["crb"].values())
+    assert "summary likelihood" in res.meta["likelihood"]["likelihood"]
     assert "other_route" in res.idata.groups()  # the check: the amortized draws beside
     status = calibration_status(res)
     assert status.route == "smc" and status.route_words.startswith("tempered SMC from the amortized posterior on")

@@ -21,23 +21,22 @@ OVERCONFIDENT_SBC = {"outer_share": 0.164, "coverage90_range": [0.70, 0.89], "n_
 
 def _amortized_diag(route: str, converged: bool, out_of_range: bool = False) -> dict:
     """Diagnostics as calibrate_amortized writes them (the fields the status reads)."""
-    emcee = {"converged": converged, "likelihood": "summary", "seconds": 20.0, "tau_max": 280.0, "steps": 4000,
-             "steps_over_tau": 14.3, "acceptance_mean": 0.3, "n_walkers": 32, "ess_min": 300.0, "rhat_max": 1.02,
-             "reason": ("chain 4000 steps >= 50 x max tau 80" if converged else
-                        "NOT CONVERGED: time budget of 20 s ended at 14.3 x max tau (280 steps; need 50)")}
-    d = {"sampler": "amortized" if route == "amortized" else "emcee", "route": route, "amortized_seconds": 0.02,
+    smc = {"converged": converged, "likelihood": "summary", "seconds": 20.0, "evaluations": 40000,
+           "particles": 3600, "stages": 6, "acceptance_last": 0.3, "unique_share": 0.8, "log_evidence": -12.0,
+           "reason": ("SMC reached beta = 1 in 6 stages, 40000 likelihood evaluations" if converged else
+                      "NOT CONVERGED: the time budget of 20 s ended the run at beta 0.4")}
+    d = {"sampler": "amortized" if route == "amortized" else "smc", "route": route, "amortized_seconds": 0.02,
          "amortized_inside_prior": 0.97, "seconds": 20.0,
          "estimator": {"class": "QUAD", "ramps": 4, "simulations": 100, "simulator": "scene",
-                       "sbc": {"amortized": HONEST_SBC, "emcee": OVERCONFIDENT_SBC}},
-         "emcee": emcee, "out_of_range": out_of_range,
+                       "sbc": {"amortized": HONEST_SBC, "smc": OVERCONFIDENT_SBC}},
+         "smc": smc, "out_of_range": out_of_range,
          "out_of_range_why": ("the two learned posteriors disagree on 2 of 8 quantities: the measurements are unlike "
                               "the estimator's training set") if out_of_range else "",
-         **{k: emcee[k] for k in ("n_walkers", "steps_over_tau", "ess_min", "acceptance_mean", "tau_max")},
-         "chain_steps": emcee["steps"], "identified": {}, "identified_ratio": 0.5}
+         "identified": {}, "identified_ratio": 0.5}
     if route == "amortized":
         d.update(converged=True, reason="amortized posterior: exact draws from the trained estimator")
     else:
-        d.update(converged=converged, reason=emcee["reason"])
+        d.update(converged=converged, reason=smc["reason"])
     return d
 
 
@@ -96,8 +95,8 @@ def _study_record(res) -> dict:
 
 CASES = [  # (route, converged, out of range) -> the words every place must print
     ("amortized", True, False, "amortized route: exact draws; SBC: honest"),
-    ("emcee", False, True, "emcee route: NOT converged; SBC: overconfident; out of range"),
-    ("emcee", True, False, "emcee route: converged; SBC: overconfident"),
+    ("smc", False, True, "smc route: NOT converged; SBC: overconfident; out of range"),
+    ("smc", True, False, "smc route: converged; SBC: overconfident"),
 ]
 
 
@@ -112,7 +111,7 @@ def test_terminal_corner_title_and_results_json_say_the_same_words(route, conver
     assert f"status: {headline}" in text
     assert ("NOT CONVERGED" in text) is False  # one spelling: 'NOT converged'
     if not converged:
-        assert "WARNING: NOT converged: time budget of 20 s ended" in text
+        assert "WARNING: NOT converged: the time budget of 20 s ended" in text
     # the corner plot's title, read back from the figure
     kept = _corner_figure(res, tmp_path / "c.png", monkeypatch)
     assert any(headline in t for t in kept["texts"]), kept["texts"]
@@ -124,7 +123,6 @@ def test_terminal_corner_title_and_results_json_say_the_same_words(route, conver
     from mdaug.reports.markup import Html
     from mdaug.reports.page_calibration import calibration_section
     from mdaug.reports.readme import _calibration_text
-    from mdaug.reports.numbers import fmt
 
     class NoFigures:
         def embed(self, *a, **k):
@@ -132,7 +130,7 @@ def test_terminal_corner_title_and_results_json_say_the_same_words(route, conver
 
     page = calibration_section({"calibration": {"QUAD": rec}}, NoFigures(), Html(), tmp_path)
     assert f"QUAD: <span class='{'ok' if st.trusted else 'warn'}'>{headline}</span>" in page
-    assert f"QUAD {headline}" in _calibration_text("QUAD", rec, fmt)
+    assert f"QUAD {headline}" in _calibration_text("QUAD", rec)
     if oor:
         assert "out of range: the two learned posteriors disagree" in page and "out of range" in text
 
@@ -157,19 +155,27 @@ def test_honesty_is_the_yardsticks_gate_and_the_rank_test_is_words():
     st = calibration_status({"sampler": "smc", "converged": False, "reason": "NOT CONVERGED: ESS 40"})
     assert (st.route, st.headline) == ("likelihood", "likelihood route: NOT converged; SBC: no SBC stored")
     assert st.convergence_detail == "ESS 40" and "tempered SMC" in st.route_words
-    # the emcee route names the likelihood it sampled
-    assert "summary likelihood" in calibration_status(_amortized_diag("emcee", True)).route_words
+    # the smc route names the likelihood it sampled
+    assert "summary likelihood" in calibration_status(_amortized_diag("smc", True)).route_words
+    # a file of an earlier release, whose sampled route was nlopt + emcee, keeps its words
+    old = _amortized_diag("smc", True)
+    old["emcee"] = old.pop("smc")
+    old.update(route="emcee", sampler="emcee")
+    old["estimator"]["sbc"]["emcee"] = old["estimator"]["sbc"].pop("smc")
+    st = calibration_status(old)
+    assert st.headline == "emcee route: converged; SBC: overconfident"
+    assert st.route_words == "nlopt + emcee on the estimator's summary likelihood"
 
 
 def test_the_check_route_keeps_its_own_words():
     st = calibration_status(_amortized_diag("amortized", True))
-    assert st.check == "emcee route, run as a check: converged" and st.check_detail.startswith("chain 4000 steps")
+    assert st.check == "smc route, run as a check: converged" and st.check_detail.startswith("SMC reached beta = 1")
     d = _amortized_diag("amortized", True)
-    d["emcee"]["converged"], d["emcee"]["reason"] = False, "NOT CONVERGED: budget"
+    d["smc"]["converged"], d["smc"]["reason"] = False, "NOT CONVERGED: budget"
     st = calibration_status(d)
-    assert st.check == "emcee route, run as a check: NOT converged" and st.check_detail == "budget"
+    assert st.check == "smc route, run as a check: NOT converged" and st.check_detail == "budget"
     assert st.headline == "amortized route: exact draws; SBC: honest"  # the check is not the route used
-    del d["emcee"]
+    del d["smc"]
     assert calibration_status(d).check == ""
 
 

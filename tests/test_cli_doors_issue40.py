@@ -70,9 +70,9 @@ def test_a_count_below_its_bound_is_refused_by_the_parser(verb, option, io_dirs,
 @pytest.mark.parametrize("argv,must", [
     (["train-estimator", "--class", "HELI", "--ramps", "4", "--out", "{o}/e.zip", "--sbc-truths", "-1"],
      ["argument --sbc-truths: expected an integer >= 0, got -1"]),
-    (["train-estimator", "--class", "HELI", "--ramps", "4", "--out", "{o}/e.zip", "--sbc-emcee-truths", "-3"],
-     ["argument --sbc-emcee-truths", "got -3"]),
-    (["sbc", "--class", "HELI", "--ramps", "4", "--emcee-truths", "-2"], ["argument --emcee-truths", "got -2"]),
+    (["train-estimator", "--class", "HELI", "--ramps", "4", "--out", "{o}/e.zip", "--sbc-route-truths", "-3"],
+     ["argument --sbc-route-truths", "got -3"]),
+    (["sbc", "--class", "HELI", "--ramps", "4", "--route-truths", "-2"], ["argument --route-truths", "got -2"]),
     (["train-estimator", "--class", "HELI", "--ramps", "4", "--out", "{o}/e.zip", "--simulations", "2000001"],
      ["argument --simulations: expected an integer from 100 to 2,000,000"]),
     (["calibrate", "{d}/m.npz", "--class", "HELI", "--out", "{o}/p.nc", "--engines", "0"],
@@ -98,14 +98,14 @@ SIZE_CASES = [
     ("train-days", [*TRAIN, "--ramps", "1000", "--simulations", "2000000"], ["--simulations 2,000,000", "would take"]),
     ("train-radar-k", [*TRAIN, "--ramps", "1001"], ["--ramps = 1001: more ramps per frame than the radar runs",
                                                     "max_ramps_per_frame is 1000"]),
-    ("train-emcee-sbc", [*TRAIN, "--ramps", "4", "--sbc-emcee-truths", "100"], ["--sbc-emcee-truths 100",
-                                                                                 "would take"]),
+    ("train-route-sbc", [*TRAIN, "--ramps", "4", "--sbc-truths", "1000", "--sbc-route-truths", "1000"],
+     ["--sbc-route-truths 1,000", "would take"]),
     ("sbc-truths", ["sbc", "--class", "HELI", "--ramps", "4", "--truths", "1000000000"],
      ["--truths 1,000,000,000", "would take"]),
-    ("sbc-emcee-days", ["sbc", "--class", "HELI", "--ramps", "4", "--truths", "3000", "--emcee-truths", "3000"],
-     ["--emcee-truths 3,000 (with --time-budget 60)", "would take"]),
-    ("sbc-emcee-beyond-truths", ["sbc", "--class", "HELI", "--ramps", "4", "--truths", "3", "--emcee-truths", "5"],
-     ["--emcee-truths 5 exceeds --truths 3"]),
+    ("sbc-route-days", ["sbc", "--class", "HELI", "--ramps", "4", "--truths", "3000", "--route-truths", "3000"],
+     ["--route-truths 3,000 (with --time-budget 60)", "would take"]),
+    ("sbc-route-beyond-truths", ["sbc", "--class", "HELI", "--ramps", "4", "--truths", "3", "--route-truths", "5"],
+     ["--route-truths 5 exceeds --truths 3"]),
     ("sbc-radar-k", ["sbc", "--class", "HELI", "--ramps", "1001"], ["--ramps = 1001", "max_ramps_per_frame"]),
     ("simulate-radar-k", ["simulate", "--class", "HELI", "--acquisitions", "1", "--ramps", "1001", "--out",
                           "{o}/s.npz"], ["--ramps = 1001", "max_ramps_per_frame"]),
@@ -278,8 +278,8 @@ def test_calibrate_reads_an_estimator_file_as_untrusted_input(name, must, estima
 # ---- 5. SIGTERM and Ctrl-C inside emcee: the one line only -------------------------------------------
 @pytest.mark.parametrize("signum", ["SIGTERM", "SIGINT"])
 def test_a_signal_inside_emcees_log_probability_prints_nothing_and_reads_as_itself(signum, capfd):
-    """The signal lands while emcee calls the log-probability (the emcee route, the
-    population's hyper-posterior: both run_ensemble): emcee's parameter dump and
+    """The signal lands while emcee calls the log-probability (the closed-form route,
+    the population's hyper-posterior: both run_ensemble): emcee's parameter dump and
     traceback are never printed, the run stops at the step's end, and the interrupt
     reads as a SIGTERM (143) or a Ctrl-C (130)."""
     import os

@@ -132,9 +132,11 @@ def synthetic_results(folder: Path, sbc: bool = False) -> dict:
                "lines": {"frequency_q": np.stack([f * 0.95, f, f * 1.05]).tolist(),
                          "amplitude_q": np.stack([a * 0.7, a, a * 1.3]).tolist(),
                          "reference_frequency": (f * 1.1).tolist()}}
-        if sbc:  # the emcee route of an estimator file, with its stored SBC
-            diag.update(route="emcee", estimator={"sbc": {"emcee": {
-                "outer_share": 0.32, "coverage90_range": [0.6, 0.8], "pooled_p": 0.01, "n_replicates": 16}}})
+        if sbc:  # the smc route of an estimator file, with its stored SBC
+            diag.update(route="smc", estimator={"sbc": {"smc": {
+                "outer_share": 0.32, "coverage90_range": [0.6, 0.8], "pooled_p": 0.01, "n_replicates": 16}}},
+                smc={"converged": cls == "HELI", "likelihood": "summary", "particles": 1000, "stages": 6,
+                     "unique_share": 0.62, "acceptance_last": 0.31, "seconds": 5.8})
         return out
 
     ceiling = {"n_train": 2000, "what": "trained on the scene simulator's own data (1000 acquisitions per class)",
@@ -294,7 +296,9 @@ def test_calibration_shows_status_and_sbc(tmp_path):
     assert "figures/corner_QUAD.png" in page  # the full corner plot, linked
     with_sbc = synthetic_results(tmp_path / "sbc", sbc=True)
     text = visible_text(write_report(with_sbc, tmp_path / "sbc" / "report.html").read_text())
-    assert "HELI: emcee route: converged; SBC: overconfident" in text
+    assert "HELI: smc route: converged; SBC: overconfident" in text
+    assert ("tempered SMC from the amortized posterior on the estimator's summary likelihood: 1000 particles, 6 "
+            "stages, distinct share 0.62;") in text
     assert ("overconfident: on 16 simulated drones, outer-10% share 0.320 (at most 0.13; 0.10 expected), 90% "
             "coverage 0.60-0.80 per quantity (at least 0.85); the rank histograms are not flat either (p = 0.01)"
             in text)
@@ -484,20 +488,20 @@ def test_precision_undefined_in_some_runs_is_their_mean_and_says_over_how_many(t
     assert "2 of 3 runs" in cells[2] and "of 3 runs" not in cells[3]
 
 
-def test_readme_calibration_line_tells_the_amortized_posterior_from_its_emcee_route(tmp_path):
+def test_readme_calibration_line_tells_the_amortized_posterior_from_its_check_route(tmp_path):
     """An amortized calibration is reported in the status words (route, exact draws, the
-    gate's verdict on its stored SBC), and the emcee route run beside it keeps its own
-    verdict (NOT converged)."""
+    gate's verdict on its stored SBC), and the smc route run beside it keeps its own
+    verdict (NOT converged) and its run's facts."""
     results = synthetic_results(tmp_path)
     cls = next(iter(results["calibration"]))
     results["calibration"][cls]["converged"] = True
     results["calibration"][cls]["diagnostics"] = {
-        "sampler": "amortized", "steps_over_tau": 17.6, "ess_min": 466.0,
+        "sampler": "amortized",
         "estimator": {"sbc": {"amortized": {"outer_share": 0.114, "coverage90_range": [0.83, 0.91],
                                             "n_replicates": 300}}},
-        "emcee": {"converged": False}}
+        "smc": {"converged": False, "particles": 3600, "stages": 12, "unique_share": 0.41}}
     line = next(x for x in results_section(results).splitlines() if x.startswith("Calibration:"))
     # coverage 0.83 < 0.85: overconfident by the one gate, though the outer share passes
     assert (f"{cls} amortized route: exact draws; SBC: overconfident (on 300 simulated drones, outer-10% share "
-            "0.114 (at most 0.13; 0.10 expected), 90% coverage 0.83-0.91 per quantity (at least 0.85)); emcee "
-            "route, run as a check: NOT converged (17.6 x max tau") in line
+            "0.114 (at most 0.13; 0.10 expected), 90% coverage 0.83-0.91 per quantity (at least 0.85)); smc "
+            "route, run as a check: NOT converged (3600 particles, 12 stages, distinct share 0.41)") in line

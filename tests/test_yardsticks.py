@@ -149,12 +149,26 @@ def test_nearest_drones_are_the_nearest_in_whitened_units():
 
 def test_the_default_route_passes_on_the_prior_and_is_sharpest_where_users_are():
     from mdaug.inference.diagnostics.routes import default_route
+    from mdaug.inference.estimator_job import name_default_route
 
     def row(outer, cov_lo, ls):
         return {"outer_share": outer, "coverage90_range": [cov_lo, 0.95], "log_score": ls}
 
-    prior = {"amortized": row(0.11, 0.86, 9.0), "smc": row(0.10, 0.85, 11.0), "emcee": row(0.31, 0.60, 40.0)}
-    users = {"amortized": row(0.0, 1.0, 6.8), "smc": row(0.0, 1.0, 4.0), "emcee": row(0.03, 0.9, -1.0)}
+    prior = {"amortized": row(0.11, 0.86, 9.0), "smc": row(0.10, 0.85, 11.0), "narrow": row(0.31, 0.60, 40.0)}
+    users = {"amortized": row(0.0, 1.0, 6.8), "smc": row(0.0, 1.0, 4.0), "narrow": row(0.03, 0.9, -1.0)}
     assert default_route(prior) == "amortized"  # the prior drones' log score alone
-    assert default_route(prior, users) == "smc"  # emcee is sharper still, but fails the gate
-    assert default_route({"emcee": prior["emcee"]}, users) is None
+    assert default_route(prior, users) == "smc"  # 'narrow' is sharper still, but fails the gate
+    assert default_route({"narrow": prior["narrow"]}, users) is None
+    # one rule for train-estimator, the sbc verb and the benchmark: the specimen drones where there are some
+    sbc = {"route_table": {"drones": 200, "rows": prior}, "specimens": {"drones": 50, "rows": users}}
+    name_default_route(sbc)
+    assert sbc["route_table"]["default"] == "smc"
+    assert sbc["route_table"]["default_by"] == "log score on 50 specimen drones"
+    del sbc["specimens"]
+    name_default_route(sbc)
+    assert (sbc["route_table"]["default"], sbc["route_table"]["default_by"]) == ("amortized",
+                                                                                "log score on 200 prior drones")
+    sbc["route_table"]["rows"] = {"narrow": prior["narrow"]}
+    name_default_route(sbc)
+    assert (sbc["route_table"]["default"], sbc["route_table"]["default_by"]) == ("amortized",
+                                                                                "no route passes the gate")

@@ -6,10 +6,11 @@ drones through the scene simulator and the chain, in resumable shards); :mod:`.n
 and :mod:`.train` (sbi's flow over a permutation-invariant embedding, the ratio
 network, the resumable training loop); :mod:`.estimator` (the trained estimator as a
 checked file; training one is a job one floor up, :mod:`..estimator_job`, ending
-with its SBC from :mod:`..diagnostics`); :mod:`.mcmc` (nlopt + emcee on the learned
-likelihood); :mod:`.calibrate` (one drone -> a CalibrationResult); :mod:`.shipped`
+with its SBC from :mod:`..diagnostics`); :mod:`.ratio_posterior` (the ratio network's
+posterior) and :mod:`.tempered` (tempered SMC from the amortized posterior to a
+learned likelihood's posterior); :mod:`.calibrate` (one drone -> a CalibrationResult); :mod:`.shipped`
 (the estimators in ``data/``). Imports :mod:`mdaug.generator`, :mod:`mdaug.radar` and
-the inference rooms below it (space, likelihood preparation, the emcee driver,
+the inference rooms below it (space, likelihood preparation, the SMC engine,
 result). torch loads with :mod:`.nets`, :mod:`.train` and :mod:`.estimator`
 (not with :mod:`mdaug.inference`), sbi inside the functions that build networks.
 """

@@ -1,22 +1,21 @@
 """calibrate_amortized(): measured profiles of one drone -> a CalibrationResult, with no
 training: the class's trained estimator (:mod:`.shipped` or a file).
 
-Three routes (:data:`.estimator.ROUTES`), each judged by the SBC and the route table
-stored in the estimator: the amortized posterior (draws in milliseconds); nlopt +
-emcee on the file's likelihood (:mod:`.mcmc`; the summary likelihood of
-:mod:`mdaug.inference.emulator` where the file has one, started from the amortized
-draws resampled by importance weight); and tempered SMC from the amortized posterior
-to the same likelihood's posterior (:mod:`.tempered`: weights between the modes that
-emcee's walkers do not cross). ``route`` None takes the file's default route (named
-by its route table, :func:`mdaug.inference.diagnostics.routes.default_route`); with ``check=True`` one other route runs
-too (emcee beside the amortized route, the amortized draws beside a sampled one) and
-lands in the group ``other_route``, with its diagnostics in the metadata. All are in
+Two routes (:data:`.estimator.ROUTES`), each judged by the SBC and the route table
+stored in the estimator: the amortized posterior (draws in milliseconds), and
+tempered SMC from the amortized posterior to the posterior of the file's likelihood
+(:mod:`.tempered`; the summary likelihood of :mod:`mdaug.inference.emulator` where
+the file has one, else the ratio network's, :mod:`.ratio_posterior`). ``route`` None
+takes the file's default route (named by its route table,
+:func:`mdaug.inference.diagnostics.routes.default_route`); with ``check=True`` the
+other route runs too and lands in the group ``other_route``, with its diagnostics in
+the metadata. All are in
 the class-vector variables of every mdaug posterior (Gamma, A_a, ..., C_m per engine,
 phases marginalised).
 
 Out of range: when the amortized posterior leaks (under half the share of draws inside
 the prior that it keeps on its own SBC drones) or the
-two routes disagree (the emcee medians outside the amortized 98% intervals for a
+two routes disagree (the smc medians outside the amortized 98% intervals for a
 quarter of the quantities or more), the measurements are unlike the training set:
 the result says so (``diagnostics['out_of_range']``) and ``calibrate`` warns.
 """
@@ -39,7 +38,7 @@ from .estimator import ROUTES
 from .shipped import find
 
 LEAK_FACTOR = 0.5  # draws inside the prior below this share of the estimator's own SBC drones': out of range
-DISAGREE_LIMIT = 0.25  # share of quantities whose emcee median leaves the amortized 98% interval
+DISAGREE_LIMIT = 0.25  # share of quantities whose smc median leaves the amortized 98% interval
 
 
 def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None = None, estimator=None,
@@ -47,13 +46,12 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
                         check: bool = False, radar: RadarConfig = RadarConfig(), source: str = "measured profiles"):
     """Calibrate one drone (module doc). estimator: an :class:`.estimator.AmortizedEstimator`,
     a path, or None (the shipped one for the class and acquisition); settings: the
-    :class:`~mdaug.inference.settings.CalibrationSettings` of the emcee route (its
-    time budget, 50-tau rule, progress; the SMC plugin's knobs for the smc route); route:
+    :class:`~mdaug.inference.settings.CalibrationSettings` of the smc route (its
+    time budget, progress, the SMC plugin's ``n_particles`` and ``max_stages``); route:
     one of :data:`.estimator.ROUTES` or None (the estimator's default route); check:
     also run another route, as a check (module doc)."""
     from ..settings import CalibrationSettings
     from .estimator import AmortizedEstimator, EstimatorError
-    from .mcmc import sample
 
     if route is not None and route not in ROUTES:
         raise ValueError(f"route must be one of {ROUTES}, got {route!r}")
@@ -62,7 +60,7 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
     settings = settings if settings is not None else CalibrationSettings()
     est = estimator if isinstance(estimator, AmortizedEstimator) else find(ref.name, acquisition, radar, path=estimator)
     route = est.default_route if route is None else route
-    sampled = route if route != "amortized" else ("emcee" if check else None)  # the sampler that runs
+    sampled = route if route != "amortized" else ("smc" if check else None)  # the sampler that runs
     data, shifts = prepare_measured(profiles, radar, "peak", what=f"{source} of class {ref.name}")
     est.check_data(data, acquisition, radar, source)
     lf = est.label_free
@@ -81,34 +79,18 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
     if sampled:
         from threadpoolctl import threadpool_limits
 
-        with threadpool_limits(settings.threads):
-            if sampled == "smc":
-                from .tempered import n_particles, sample_tempered
+        from .tempered import n_particles, sample_tempered
 
-                post = est.target(data, plug_in=np.median(u, axis=0))
-                start, _ = est.sample_u(data, n_particles(settings, lf.dim), child_seed(ss, "smc-start"), strict=False)
-                run = sample_tempered(post, lambda v: est.log_prob_u(v, data), start, settings, child_seed(ss, "smc"))
-                fit = {}
-            else:
-                post = est.target(data)
-                start = u[:1000]
-                log_q = est.log_prob_u(start, data) if est.summary is not None else None
-                run, fit = sample(post, start, settings, child_seed(ss, "emcee"), log_q=log_q)
+        with threadpool_limits(settings.threads):
+            post = est.target(data, plug_in=np.median(u, axis=0))
+            start, _ = est.sample_u(data, n_particles(settings, lf.dim), child_seed(ss, "smc-start"), strict=False)
+            run = sample_tempered(post, lambda v: est.log_prob_u(v, data), start, settings, child_seed(ss, "smc"))
         x_sampled = post.vectors(run.draws())
-        names = post.label_free.names
         info = {"converged": bool(run.converged), "reason": run.reason, "seconds": float(run.seconds),
-                "likelihood": est.likelihood_name, "evaluations": int(post.n_calls)}
-        if sampled == "smc":
-            info.update(particles=int(run.chain.shape[1]), stages=int(run.extra["smc_stages"]),
-                        acceptance_last=float(run.acceptance.mean()),
-                        unique_share=float(run.extra["smc_unique_share"]), log_evidence=float(run.extra["smc_log_z"]))
-        else:
-            info.update(tau_max=float(run.tau.max()), steps=int(run.n_steps),
-                        steps_over_tau=float(run.n_steps / run.tau.max()),
-                        acceptance_mean=float(run.acceptance.mean()), n_walkers=int(run.chain.shape[1]),
-                        ess_min=float(run.ess.min()), rhat_max=_rhat(run, names), fit=fit)
-            diag.update({k: info[k] for k in ("n_walkers", "steps_over_tau", "ess_min", "acceptance_mean",
-                                              "tau_max")}, chain_steps=info["steps"])
+                "likelihood": est.likelihood_name, "evaluations": int(post.n_calls),
+                "particles": int(run.chain.shape[1]), "stages": int(run.extra["smc_stages"]),
+                "acceptance_last": float(run.acceptance.mean()),
+                "unique_share": float(run.extra["smc_unique_share"]), "log_evidence": float(run.extra["smc_log_z"])}
         if est.summary is not None:
             info["crb"] = _crb(post, np.median(run.draws(), axis=0))
         diag[sampled] = info
@@ -166,18 +148,6 @@ def _sbc_line(est, route: str) -> str:
         return "none stored"
     lo, hi = s["coverage90_range"]
     return f"outer-10% share {s['outer_share']:.3f}, 90% coverage {lo:.2f}-{hi:.2f} on {s['n_replicates']} drones"
-
-
-def _rhat(run, names) -> float:
-    """Split R-hat (arviz) over the walkers, the worst coordinate."""
-    az = import_arviz()
-    chain = run.chain[run.burn // run.store_every:]
-    if chain.shape[0] < 4:
-        return float("nan")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        r = az.rhat(az.convert_to_dataset(np.swapaxes(chain, 0, 1)))
-    return float(np.nanmax(r["x"].values))
 
 
 def _out_of_range(lf, x_amortized, x_sampled, inside: float, typical: float) -> tuple[bool, str]:

@@ -3,10 +3,10 @@
 File: a ZIP of ``meta.json`` (format, class, radar, acquisition, prior, simulator
 version, simulations, network and training settings, SBC figures) and two torch
 state dicts, ``posterior.pt`` (the amortized posterior q(u | measurements)) and
-``ratio.pt`` (the per-measurement likelihood ratio of the emcee path), and optionally
-``summary.pt`` with the meta field ``summary`` (the summary likelihood of
-:mod:`mdaug.inference.emulator`, which the emcee route then uses instead of the
-ratio), read with ``torch.load(weights_only=True)``. Loading checks every field and refuses, by name,
+``ratio.pt`` (the per-measurement likelihood ratio, the smc route's likelihood where
+there is no other), and optionally ``summary.pt`` with the meta field ``summary`` (the
+summary likelihood of :mod:`mdaug.inference.emulator`, which the smc route then uses
+instead of the ratio), read with ``torch.load(weights_only=True)``. Loading checks every field and refuses, by name,
 an estimator of another class, radar or acquisition than the data's, with the
 command that trains the right one.
 """
@@ -32,10 +32,12 @@ FORMAT = "mdaug-estimator-1"
 MEMBERS = ("meta.json", "posterior.pt", "ratio.pt")
 SUMMARY_MEMBER = "summary.pt"
 """Optional member: the summary likelihood's weights (with meta field 'summary')."""
-ROUTES = ("amortized", "emcee", "smc")
-"""The routes of a calibration: the amortized posterior's exact draws, nlopt + emcee on
-the file's likelihood (the summary likelihood where the file has one), or tempered
-SMC from the amortized posterior to that likelihood's posterior (:mod:`.tempered`)."""
+ROUTES = ("amortized", "smc")
+"""The routes of a calibration: the amortized posterior's exact draws, or tempered SMC
+from the amortized posterior to the posterior of the file's likelihood (the summary
+likelihood where the file has one, else the ratio network's; :mod:`.tempered`).
+(nlopt + emcee started from the amortized draws lost to both on every row of the
+route tables, docs/calibration.md, and left the package.)"""
 META_FIELDS = ("format", "spec", "prior", "net", "n_simulations", "label_free", "training", "sbc", "seed")
 
 
@@ -76,7 +78,7 @@ class AmortizedEstimator:
 
     @property
     def likelihood_name(self) -> str:
-        """The emcee route's likelihood: 'summary' (the file has one) or 'ratio'."""
+        """The sampled route's likelihood: 'summary' (the file has one) or 'ratio'."""
         return "ratio" if self.summary is None else "summary"
 
     def target(self, profiles: np.ndarray, plug_in: np.ndarray | None = None):
@@ -89,7 +91,7 @@ class AmortizedEstimator:
             from ..emulator.posterior import EmulatedPosterior
 
             return EmulatedPosterior(self.summary, profiles, plug_in)
-        from .mcmc import LearnedPosterior
+        from .ratio_posterior import LearnedPosterior
 
         return LearnedPosterior(self, profiles)
 

@@ -1,11 +1,11 @@
 """Tempered SMC from the amortized posterior to the learned likelihood's posterior.
 
-The ``smc`` route. The emcee route starts its walkers where the amortized draws,
-weighted by p(u | x) / q(u), put them; when that weight sits on a few draws (an
-importance ESS of 2-4 of 1,000 on HELI K = 32 prior drones) the walkers start in one
-mode, and emcee's moves do not cross to the others: on 208 fresh prior drones its
-posterior held the truth inside its 90% interval for 62-71% of them (outer-10% share
-0.317), converged or not. The posterior is multimodal in the lines (a sideband at
+The ``smc`` route. It replaced nlopt + emcee started from the amortized draws, whose
+walkers started where the amortized draws, weighted by p(u | x) / q(u), put them;
+when that weight sat on a few draws (an importance ESS of 2-4 of 1,000 on HELI K = 32
+prior drones) the walkers started in one mode, and emcee's moves did not cross to the
+others: on 208 fresh prior drones that posterior held the truth inside its 90% interval
+for 62-71% of them (outer-10% share 0.317), converged or not. The posterior is multimodal in the lines (a sideband at
 |w_i +- w_j| or 2 w_j fits nearly as well as the line itself), and the fix is not a
 longer chain but weights between the modes.
 

@@ -96,7 +96,7 @@ def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n
     else:
         mean, data_seed = ref, int(data_ss.generate_state(1)[0])
     camp = simulate_campaign(mean, n_drones + 1, (n_drones + 1) * n_acquisitions, data_seed, scene=scene)
-    if method == "amortized":  # the shipped estimator's posterior per drone (milliseconds; no emcee route)
+    if method == "amortized":  # the shipped estimator's posterior per drone (milliseconds; no smc route)
         from ..amortized.calibrate import calibrate_amortized
         from ..amortized.estimator import EstimatorError
 

@@ -1,4 +1,4 @@
-"""The summary likelihood of the emcee route: :mod:`.summary` (the folded mean
+"""The summary likelihood of the smc route: :mod:`.summary` (the folded mean
 log-profile and its whitening), :mod:`.sketch` (where a drone's lines put power, in
 closed form), :mod:`.net` (the emulator, the within-drone covariance and the
 emulator-error networks), :mod:`.model` (the trained model, its Fisher information and

@@ -1,8 +1,8 @@
 """The emulated posterior: the calibration prior times the summary likelihood, in u.
 
-Same interface as :class:`mdaug.inference.amortized.mcmc.LearnedPosterior` (``dim``,
-``label_free``, a vectorised ``__call__`` u (W, d) -> (W,), ``vectors``), so the one
-fit-then-emcee driver :func:`mdaug.inference.amortized.mcmc.sample` runs it.
+Same interface as :class:`mdaug.inference.amortized.ratio_posterior.LearnedPosterior`
+(``dim``, ``label_free``, a vectorised ``__call__`` u (W, d) -> (W,), ``vectors``), so
+the smc route (:mod:`mdaug.inference.amortized.tempered`) runs either.
 """
 from __future__ import annotations
 

@@ -34,7 +34,7 @@ def corner_title(res, status=None) -> str:
 def corner_markers(res, truths) -> list[tuple[str, str, np.ndarray]]:
     """What the corner marks beside the quantiles: (label, colour, engine vectors (E, 13)).
     The true values where they are known (simulated data); the global fit only for the
-    closed-form route (the amortized and emcee routes have no fit of their own: their
+    closed-form route (the amortized and smc routes have no fit of their own: their
     'best fit' is the posterior median, which the 50% line shows)."""
     marks = []
     if truths is not None:

@@ -79,20 +79,12 @@ def amortized_report(res, identified_ratio: float) -> str:
              f"estimator: {est['class']} K = {est['ramps']}, {est['simulations']} simulated drones ({est['simulator']})"]
     lines.append(f"amortized posterior: {d['amortized_seconds'] * 1e3:.0f} ms, {d['amortized_inside_prior']:.0%} of "
                  "its draws inside the prior")
-    if "emcee" in d:
-        m = d["emcee"]
-        which = {"summary": "the summary likelihood", "ratio": "the learned likelihood ratio"}.get(
-            m.get("likelihood", "ratio"), "the learned likelihood")
-        role = "the route used" if d["route"] == "emcee" else "run as a check"
-        lines.append(f"nlopt + emcee on {which} ({role}): {m['n_walkers']} walkers x {m['steps']} steps "
-                     f"({m['seconds']:.1f} s), max tau {m['tau_max']:.0f} steps, chain/tau {m['steps_over_tau']:.1f}, "
-                     f"min ESS {m['ess_min']:.0f}, R-hat max {m['rhat_max']:.3f}, acceptance {m['acceptance_mean']:.2f}: "
-                     + "{}: {}".format(*chain_words(m["converged"], m["reason"])))
     if "smc" in d:
         m = d["smc"]
         which = {"summary": "the summary likelihood", "ratio": "the learned likelihood ratio"}.get(
             m.get("likelihood", "ratio"), "the learned likelihood")
-        lines.append(f"tempered SMC from the amortized posterior on {which} (the route used): "
+        role = "the route used" if d["route"] == "smc" else "run as a check"
+        lines.append(f"tempered SMC from the amortized posterior on {which} ({role}): "
                      f"{m['particles']} particles, {m['stages']} stages ({m['seconds']:.1f} s), unique share "
                      f"{m['unique_share']:.2f}, last acceptance {m['acceptance_last']:.2f}: "
                      + "{}: {}".format(*chain_words(m["converged"], m["reason"])))

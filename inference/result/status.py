@@ -6,10 +6,10 @@ report (:mod:`.report`), the corner plot's title (:mod:`.plots`), the study's
 
 The facts and their words:
 
-* **route**: ``amortized`` (the estimator's exact draws), ``emcee`` (nlopt + emcee on
-  the estimator's learned likelihood: its summary likelihood or its likelihood ratio,
-  ``diagnostics['emcee']['likelihood']``), ``smc`` (tempered SMC from the amortized
-  posterior to the same learned likelihood's posterior, ``diagnostics['smc']``) or
+* **route**: ``amortized`` (the estimator's exact draws), ``smc`` (tempered SMC from
+  the amortized posterior to the posterior of the estimator's learned likelihood: its
+  summary likelihood or its likelihood ratio, ``diagnostics['smc']['likelihood']``;
+  files of earlier releases may say ``emcee``, nlopt + emcee on the same) or
   ``likelihood`` (``--method likelihood``: the closed-form route, sampled by emcee, SMC
   or a Laplace approximation);
 * **convergence**: ``converged`` or ``NOT converged`` for a chain (emcee, SMC, Laplace);
@@ -64,9 +64,9 @@ class CalibrationStatus:
     words every place prints (module doc)."""
 
     route: str
-    """'amortized', 'emcee', 'smc' or 'likelihood'."""
+    """'amortized', 'smc' or 'likelihood' ('emcee' in files of releases before the smc route)."""
     route_words: str
-    """How the posterior was drawn, e.g. "nlopt + emcee on the estimator's summary likelihood"."""
+    """How the posterior was drawn, e.g. "tempered SMC from the amortized posterior on the estimator's summary likelihood"."""
     converged: bool
     """True for exact draws and for a converged chain (the exit status follows it)."""
     convergence: str
@@ -84,7 +84,7 @@ class CalibrationStatus:
     out_of_range: bool
     out_of_range_why: str
     check_route: str
-    """The other route when it ran as a check ('emcee'), else ''."""
+    """The other route when it ran as a check ('smc'; 'emcee' in earlier files), else ''."""
     check_convergence: str
     """Its convergence word ('converged' or 'NOT converged'; '' when it did not run)."""
     check_detail: str
@@ -100,7 +100,7 @@ class CalibrationStatus:
     @property
     def headline(self) -> str:
         """One line: route, convergence, honesty and, when so, out of range:
-        e.g. ``emcee route: NOT converged; SBC: overconfident; out of range``."""
+        e.g. ``smc route: NOT converged; SBC: overconfident; out of range``."""
         text = f"{self.route} route: {self.convergence}; SBC: {self.honesty}"
         return text + (f"; {OUT_OF_RANGE}" if self.out_of_range else "")
 
@@ -147,6 +147,30 @@ class CalibrationStatus:
                 "trusted": self.trusted}
 
 
+def run_facts(d: dict, num=None) -> str:
+    """The sampled run behind a calibration's diagnostics ``d`` in a few words, as the
+    README line and the report print it: the smc route's particles, stages and share of
+    distinct particles (the route used or its check); the closed-form SMC's particles,
+    stages and least ESS; an emcee chain's length over its autocorrelation time and
+    least ESS; '' where nothing was sampled (the amortized route alone). ``num(key,
+    value, decimals)`` writes each number (key: its place in ``d``, dotted; default:
+    plain text, '–' when missing), so the report can key it to results.json."""
+    num = num or (lambda key, value, decimals: "–" if value is None else f"{value:.{decimals}f}")
+    m = d.get("smc")
+    if isinstance(m, dict) and "particles" in m:
+        parts = [("smc.particles", m["particles"], 0, "{} particles"), ("smc.stages", m["stages"], 0, "{} stages"),
+                 ("smc.unique_share", m["unique_share"], 2, "distinct share {}")]
+    elif d.get("sampler") == "smc" and "smc_n_particles" in d:
+        parts = [("smc_n_particles", d["smc_n_particles"], 0, "{} particles"),
+                 ("smc_stages", d.get("smc_stages"), 0, "{} stages"), ("ess_min", d.get("ess_min"), 0, "min ESS {}")]
+    elif d.get("steps_over_tau") is not None:
+        parts = [("steps_over_tau", d["steps_over_tau"], 1, "chain {} x max tau"),
+                 ("ess_min", d.get("ess_min"), 0, "min ESS {}")]
+    else:
+        return ""
+    return ", ".join(label.format(num(key, value, dec)) for key, value, dec, label in parts)
+
+
 def chain_words(converged: bool, reason: str) -> tuple[str, str]:
     """('converged' or 'NOT converged', the reason without a status prefix)."""
     return (CONVERGED if converged else NOT_CONVERGED), _strip(reason)
@@ -182,8 +206,9 @@ def calibration_status(source) -> CalibrationStatus:
     elif route == "amortized":
         words = "the amortized posterior: the estimator's exact draws"
         convergence, detail = EXACT, ""
-        if "emcee" in d:
-            check = ("emcee", *chain_words(bool(d["emcee"].get("converged")), d["emcee"].get("reason", "")))
+        other = next((r for r in ("smc", "emcee") if r in d), None)  # emcee: a file of an earlier release
+        if other:
+            check = (other, *chain_words(bool(d[other].get("converged")), d[other].get("reason", "")))
     else:
         m = d.get(route, {})
         how = "tempered SMC from the amortized posterior" if route == "smc" else "nlopt + emcee"

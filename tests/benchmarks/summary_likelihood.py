@@ -59,7 +59,7 @@ def main(argv=None) -> int:
     from mdaug.inference.amortized.simulate import load_shards
     from mdaug.inference.emulator.model import from_parts, to_parts
     from mdaug.inference.emulator.train import train_summary_model
-    from mdaug.inference.estimator_job import estimator_sbc, specimen_table
+    from mdaug.inference.estimator_job import estimator_sbc, name_default_route, specimen_table
     from mdaug.inference.settings import CalibrationSettings
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -118,25 +118,24 @@ def main(argv=None) -> int:
     routes = tuple(a.routes.split(",")) if a.routes else None
     old = est.meta.get("sbc", {})
     # with --from-file the file's model is unchanged: a part not rerun here is kept
-    keep = ("amortized", "n_measurements") + (("route_table", "emcee", "smc", "specimens") if a.from_file else ())
+    keep = ("amortized", "n_measurements") + (("route_table", "smc", "specimens") if a.from_file else ())
     new = {k: v for k, v in old.items() if k in keep}
     if a.route_truths:
-        sbc = estimator_sbc(est, a.route_truths, seed=a.seed, workers=a.workers, mcmc_truths=a.route_truths,
-                            mcmc_settings=settings, estimator_path=a.out, log=print, routes=routes)
+        sbc = estimator_sbc(est, a.route_truths, seed=a.seed, workers=a.workers, route_truths=a.route_truths,
+                            route_settings=settings, estimator_path=a.out, log=print, routes=routes,
+                            specimens=a.specimens, specimen_seed=a.seed + 1)
         new.update({k: v for k, v in sbc.items() if k not in ("amortized", "n_measurements")})
         print(f"\nroute table, {a.route_truths} fresh prior drones (SBC), {a.cls} K = {a.ramps}, 5 measurements:")
         print(table(sbc["route_table"]["rows"], names))
+    elif a.specimens:  # the file's route table kept, its specimen drones rerun
+        new["specimens"] = specimen_table(est, a.specimens, settings=settings, seed=a.seed + 1, workers=a.workers,
+                                          estimator_path=a.out, routes=routes)
     if a.specimens:
-        spec = specimen_table(est, a.specimens, settings=settings, seed=a.seed + 1, workers=a.workers,
-                              estimator_path=a.out, routes=routes)
-        new["specimens"] = spec
+        spec = new["specimens"]
         print(f"\n{a.specimens} drones drawn as the study draws new drones (specimen model around the reference):")
         print(table(spec["rows"], names, spec.get("crb_width_over_truth")))
-    if new.get("route_table") and new.get("specimens"):  # honest on the prior, sharpest where users are
-        from mdaug.inference.diagnostics.routes import default_route
-
-        new["route_table"]["default"] = default_route(new["route_table"]["rows"], new["specimens"]["rows"])
-        new["route_table"]["default_by"] = f"log score on {new['specimens']['drones']} specimen drones"
+    if new.get("route_table"):  # honest on the prior, sharpest where users are
+        name_default_route(new)
     est.meta["sbc"] = new
     default = (new.get("route_table") or {}).get("default") or "amortized"
     est.meta["default_route"] = default
