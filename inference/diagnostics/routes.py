@@ -1,7 +1,7 @@
 """Simulation-based calibration of any posterior route on fresh simulated drones.
 
 ``draw(profiles, n, seed) -> q draws (n, d)`` is the route under test (the amortized
-posterior, or nlopt + emcee on the learned likelihood). For each truth: the rank of
+posterior, or tempered SMC to the learned likelihood's posterior). For each truth: the rank of
 its label-free quantities among n_rank draws (:func:`.sbc.summarise`
 turns ranks into the rank chi-square p-values and the outer-10% share, 0.10 when
 honest), the coverage of central intervals at several levels (the coverage curve),

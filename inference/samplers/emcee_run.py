@@ -140,19 +140,8 @@ def _block_end(it: int, check: int, max_steps: int | None) -> int:
     return end if max_steps is None else min(end, max_steps)
 
 
-def smooth_moves():
-    """emcee's own mixture for a smooth target with no phases and no labelling symmetry
-    (the label-free routes): differential evolution at the standard scale (80%) and the
-    DE snooker move (20%). On the summary likelihood's HELI posteriors it gave tau of
-    65-90 steps where the ridge mixture of :func:`make_moves` (half its steps at a
-    quarter of the scale) gave 200-430."""
-    import emcee
-
-    return [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
-
-
 def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=None, fp: str = "",
-                 phase_cols=(), relabel=None, moves=None) -> SamplerRun:
+                 phase_cols=(), relabel=None) -> SamplerRun:
     """Run (or resume) the ensemble; see the module docstring.
 
     log_post: vectorised callable theta (W, dim) -> (W,); p0: (W, dim) start (ignored
@@ -161,9 +150,8 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
     ``relabel``, ``progress``; the emcee knobs at ``settings.of("emcee")``, an
     :class:`.ensemble.EmceeSettings`); seed: int for emcee's RandomState;
     phase_cols: columns that live on the circle (wrapped by the moves); relabel: the
-    exact-symmetry move (``settings.relabel`` of the steps), see :func:`make_moves`;
-    moves: emcee's (move, weight) list instead of :func:`make_moves`' (e.g.
-    :func:`smooth_moves`). Stops at the first check at or after ``min_tau_multiple`` x max tau with tau
+    exact-symmetry move (``settings.relabel`` of the steps), see :func:`make_moves`.
+    Stops at the first check at or after ``min_tau_multiple`` x max tau with tau
     stable, when ``time_budget`` seconds have passed (checked at every step), or at
     ``max_steps`` (None: no step cap). A Ctrl-C stops at the next step with the
     checkpoint saved and raises :class:`CalibrationInterrupted`.
@@ -175,7 +163,7 @@ def run_ensemble(log_post, p0: np.ndarray, settings, seed: int, backend_path=Non
     t0 = time.perf_counter()
     own = settings.of("emcee")
     n_walkers, dim = p0.shape
-    moves = make_moves(phase_cols, dim, relabel, settings.relabel) if moves is None else moves
+    moves = make_moves(phase_cols, dim, relabel, settings.relabel)
     backend, resumed_at = None, 0
     if backend_path is not None:
         path = Path(backend_path)

@@ -1,7 +1,7 @@
 """Refit the widening of a file's summary likelihood on held-out simulated drones.
 
-python tests/benchmarks/refit_widening.py --class HELI --ramps 32 [--prior 300] [--near 100] \
-    [--specimens 60] [--seed 999] [--scale C] [--workers 2] --out FILE
+python tests/benchmarks/refit_widening.py --class HELI --ramps 32 [--from-file FILE0] [--prior 300] \
+    [--near 100] [--specimens 60] [--seed 999] [--scale C] [--workers 2] --out FILE
 
 1. Fresh drones (5 measurements each), none of them an SBC or route-table drone (their
    seeds differ): --prior drones of the prior, --near drones of the specimen model at
@@ -13,7 +13,7 @@ python tests/benchmarks/refit_widening.py --class HELI --ramps 32 [--prior 300] 
 3. The widening w(u) fitted to them (:func:`~mdaug.inference.emulator.train.fit_widening`,
    log w linear and quadratic in u), times --scale C (an extra factor chosen by the
    route's own SBC on other held-out drones, stated in the file), written into a copy
-   of the shipped file with its stale route table removed.
+   of the shipped file (or of --from-file) with its stale route table removed.
 Prints the gaps against chi-square(d) before and after, per group of drones.
 """
 from __future__ import annotations
@@ -74,6 +74,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--class", dest="cls", required=True)
     ap.add_argument("--ramps", type=int, required=True)
+    ap.add_argument("--from-file", default=None, help="estimator file (default: the shipped one)")
     ap.add_argument("--prior", type=int, default=300)
     ap.add_argument("--near", type=int, default=100)
     ap.add_argument("--specimens", type=int, default=60)
@@ -83,7 +84,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True)
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
-    path = shipped_path(a.cls, a.ramps)
+    path = a.from_file or shipped_path(a.cls, a.ramps)
     est = AmortizedEstimator.load(path)
     if est.summary is None:
         ap.error(f"{path} carries no summary likelihood")
