@@ -48,8 +48,10 @@ def _signalled(argv, d, send):
     """Start ``argv``, wait for its two workers (the calibrations), signal it with
     ``send(process)``; returns (status, stdout, stderr, seconds to exit, workers)."""
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path), OMP_NUM_THREADS="1")
+    # Ctrl-C as a terminal gives it: SIGINT at its default in the command, even where this
+    # test runs as a background job of a non-interactive shell (which starts it ignored)
     p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-                         env=env)
+                         env=env, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         t0, kids = time.time(), []
         while time.time() - t0 < STARTUP_S and len(kids) < 2 and p.poll() is None:
