@@ -175,9 +175,9 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
         out["route_table"] = {"drones": int(k), "default": table["default"],
                               "rows": {n: _row(r) for n, r in table["rows"].items()}}
         if specimens:
-            out["specimens"] = specimen_table(est, specimens, settings=settings, seed=child_seed(seed, "specimens") if specimen_seed is None else specimen_seed,
-                                              workers=workers, estimator_path=estimator_path, progress=progress,
-                                              routes=tuple(routes))
+            s_seed = child_seed(seed, "specimens") if specimen_seed is None else specimen_seed
+            out["specimens"] = specimen_table(est, specimens, settings=settings, seed=s_seed, workers=workers,
+                                              estimator_path=estimator_path, progress=progress, routes=tuple(routes))
         name_default_route(out)
         log(f"  route table on {k} drones: default route {out['route_table']['default']} "
             f"({out['route_table']['default_by']})")
@@ -233,15 +233,13 @@ class Route:
         return self._est
 
     def __call__(self, y, n, s):
-        from .amortized.tempered import n_particles, sample_tempered
+        from .amortized.tempered import smc_route
 
         est, lf = self.est, self.est.label_free
         if self.name == "amortized":
             u, _ = est.sample_u(y, n, s, strict=False)
             return lf.from_unbounded(u), True
-        u, _ = est.sample_u(y, n_particles(self.settings, lf.dim), s, strict=False)
-        post = est.target(y, plug_in=np.median(u, axis=0))
-        run = sample_tempered(post, lambda v: est.log_prob_u(v, y), u, self.settings, s)
+        _, run = smc_route(est, y, self.settings, s, s)
         draws = run.draws()
         pick = np.random.default_rng(s).choice(len(draws), size=n, replace=len(draws) < n)
         return lf.from_unbounded(draws[pick]), run.converged

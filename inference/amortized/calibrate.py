@@ -79,12 +79,11 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
     if sampled:
         from threadpoolctl import threadpool_limits
 
-        from .tempered import n_particles, sample_tempered
+        from .tempered import smc_route
 
         with threadpool_limits(settings.threads):
-            post = est.target(data, plug_in=np.median(u, axis=0))
-            start, _ = est.sample_u(data, n_particles(settings, lf.dim), child_seed(ss, "smc-start"), strict=False)
-            run = sample_tempered(post, lambda v: est.log_prob_u(v, data), start, settings, child_seed(ss, "smc"))
+            post, run = smc_route(est, data, settings, child_seed(ss, "smc-start"), child_seed(ss, "smc"),
+                                  plug_in=np.median(u, axis=0))
         x_sampled = post.vectors(run.draws())
         info = {"converged": bool(run.converged), "reason": run.reason, "seconds": float(run.seconds),
                 "likelihood": est.likelihood_name, "evaluations": int(post.n_calls),

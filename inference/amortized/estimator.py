@@ -85,7 +85,7 @@ class AmortizedEstimator:
         """The sampled routes' target for these measurements (M, L): the summary
         likelihood's posterior where the file has one (its covariance held at u =
         ``plug_in`` when given, :class:`~mdaug.inference.emulator.posterior.EmulatedPosterior`),
-        else the ratio network's; both vectorised callables u (W, d) -> (W,) with ``dim``,
+        else the ratio network's (which has no covariance: ``plug_in`` is not used); both vectorised callables u (W, d) -> (W,) with ``dim``,
         ``label_free``, ``vectors``."""
         if self.summary is not None:
             from ..emulator.posterior import EmulatedPosterior

@@ -74,3 +74,14 @@ def sample_tempered(post, log_q, u_start: np.ndarray, settings, seed, *, ess: fl
                   max_sweeps=max_sweeps, max_stages=own.max_stages, progress=settings.progress,
                   time_budget=settings.time_budget)
     return sampler_run(res)
+
+
+def smc_route(est, profiles: np.ndarray, settings, start_seed, seed, plug_in: np.ndarray | None = None):
+    """The smc route of an estimator ``est`` for measurements ``profiles`` (M, L), as
+    ``calibrate`` and the route tables run it: :func:`n_particles` amortized draws
+    (seeded by ``start_seed``) start :func:`sample_tempered` (seeded by ``seed``) to
+    ``est.target(profiles, plug_in)``, the covariance held at ``plug_in`` (default: the
+    starting draws' median). Returns (that target, the SamplerRun)."""
+    start, _ = est.sample_u(profiles, n_particles(settings, est.label_free.dim), start_seed, strict=False)
+    post = est.target(profiles, plug_in=np.median(start, axis=0) if plug_in is None else plug_in)
+    return post, sample_tempered(post, lambda v: est.log_prob_u(v, profiles), start, settings, seed)
