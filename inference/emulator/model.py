@@ -36,6 +36,19 @@ from .summary import Whitening
 LOG_2PI = float(np.log(2 * np.pi))
 
 
+def gaussian_log_density(resid: np.ndarray, chol: np.ndarray) -> np.ndarray:
+    """log N(resid; 0, L L') (N,) for residuals (N, D) and a Cholesky factor L: one (D, D)
+    for every residual, or (N, D, D), one each."""
+    resid = np.asarray(resid, float)
+    if chol.ndim == 2:
+        w = np.linalg.solve(chol, resid.T).T
+        logdet = np.log(np.diag(chol)).sum()
+    else:
+        w = np.linalg.solve(chol, resid[..., None])[..., 0]
+        logdet = np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(1)
+    return -0.5 * resid.shape[-1] * LOG_2PI - logdet - 0.5 * (w * w).sum(-1)
+
+
 @dataclass
 class SummaryModel:
     """The emulated likelihood of one class under one acquisition (module doc)."""
@@ -96,10 +109,7 @@ class SummaryModel:
         """log N(z_bar; mu(u), Sigma_n(u)): (N,) for u (N, d) and the whitened mean z_bar
         (D,) of n measurements (the widening left out with ``widen=False``)."""
         mean, cov = self.moments(u, n_measurements, widen=widen)
-        chol = np.linalg.cholesky(cov)
-        w = np.linalg.solve(chol, (mean - z_bar)[..., None])[..., 0]
-        logdet = np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(1)
-        return -0.5 * len(z_bar) * LOG_2PI - logdet - 0.5 * (w * w).sum(1)
+        return gaussian_log_density(mean - z_bar, np.linalg.cholesky(cov))
 
     def covariance_from(self, within: np.ndarray, ab: np.ndarray, n_measurements: int) -> np.ndarray:
         """c (W (1 / n + a) + b I) (module doc) from W (N, D, D) and (a, b) (N, 2)."""

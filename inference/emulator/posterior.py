@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .model import LOG_2PI, SummaryModel, cramer_rao
+from .model import SummaryModel, cramer_rao, gaussian_log_density
 
 
 class EmulatedPosterior:
@@ -38,9 +38,7 @@ class EmulatedPosterior:
     def log_likelihood(self, u: np.ndarray) -> np.ndarray:
         """log N(z_bar; mu(u), Sigma_n): (N,) for u (N, d)."""
         if self._chol is not None:
-            w = np.linalg.solve(self._chol, (self.model.mean(u) - self.z).T).T
-            logdet = np.log(np.diag(self._chol)).sum()
-            return -0.5 * len(self.z) * LOG_2PI - logdet - 0.5 * (w * w).sum(1)
+            return gaussian_log_density(self.model.mean(u) - self.z, self._chol)
         return self.model.log_likelihood(u, self.z, self.n_measurements)
 
     def __call__(self, u: np.ndarray) -> np.ndarray:
