@@ -376,6 +376,8 @@ def test_calibrate_verb_refuses_what_the_estimator_cannot_take(tiny, tmp_path, r
             ["spec.class_name", "'QUAD'"])
     refused(["calibrate", str(good), "--class", "HELI", "--out", post, "--estimator", str(path),
              "--likelihood", "marginal"], inputs, out, ["--likelihood applies to --method likelihood"])
+    refused(["calibrate", str(good), "--class", "HELI", "--out", post, "--estimator", str(path),
+             "--max-steps", "200"], inputs, out, ["--max-steps applies to --method likelihood"])  # emcee's knob
     refused(["calibrate", str(good), "--class", "HELI", "--out", post, "--estimator", str(inputs / "none.zip")],
             inputs, out, ["none.zip"])
 
