@@ -20,7 +20,7 @@ from mdaug.inference.space.priors import Priors, engine_lines  # noqa: E402
 
 TINY = NetConfig(channels=(2, 4, 4, 4), trial_out=8, set_hidden=16, set_out=8, flow_hidden=16, flow_transforms=2,
                  ratio_hidden=16)
-TINY_SUMMARY = EmulatorConfig(n_offsets=64, n_components=4, hidden=16, depth=1, cov_hidden=16, epochs=3, cov_epochs=3,
+TINY_SUMMARY = EmulatorConfig(n_offsets=64, n_components=4, hidden=16, depth=1, members=2, cov_hidden=16, epochs=3, cov_epochs=3,
                               n_calibration=3)
 
 

@@ -172,3 +172,35 @@ def test_the_default_route_passes_on_the_prior_and_is_sharpest_where_users_are()
     name_default_route(sbc)
     assert (sbc["route_table"]["default"], sbc["route_table"]["default_by"]) == ("amortized",
                                                                                 "no route passes the gate")
+
+
+def test_the_emulator_ensemble_is_the_mean_of_its_members_and_old_files_load_as_one():
+    import torch
+
+    from mdaug.inference.emulator.net import Emulator, fit
+
+    torch.manual_seed(0)
+    rng = np.random.default_rng(0)
+    u, sk = rng.normal(size=(200, 3)), rng.normal(size=(200, 5))
+    target = np.c_[u[:, :1] + sk[:, :1], u[:, 1:2] * sk[:, 1:2]]
+    nets = []
+    for k in range(3):
+        net = Emulator(3, 5, 2, hidden=8, depth=1)
+        fit(net, u, sk, target, seed=k, epochs=3)
+        nets.append(net)
+    ens = Emulator.stack(nets)
+    tu, ts = torch.as_tensor(u[:7], dtype=torch.float32), torch.as_tensor(sk[:7], dtype=torch.float32)
+    with torch.no_grad():
+        want = torch.stack([n(tu, ts) for n in nets]).mean(0)
+        assert torch.allclose(ens(tu, ts), want, atol=1e-6)
+        assert not torch.allclose(nets[0](tu, ts), nets[1](tu, ts))  # the members differ
+    assert ens.config()["members"] == 3
+    with pytest.raises(ValueError, match="one-member"):
+        fit(ens, u, sk, target, seed=0, epochs=1)
+    # a file written before the ensemble: one network under 'mlp.', in_mean (F,)
+    old = {("mlp." + k[len("mlps.0."):] if k.startswith("mlps.0.") else k): (v[0] if k in ("in_mean", "in_sd") else v)
+           for k, v in nets[0].state_dict().items()}
+    one = Emulator(3, 5, 2, hidden=8, depth=1)
+    one.load_state_dict(Emulator.upgrade_state(old))
+    with torch.no_grad():
+        assert torch.equal(one(tu, ts), nets[0](tu, ts))

@@ -224,6 +224,8 @@ def from_parts(meta: dict, state: dict, class_name: str, acquisition: Acquisitio
                               ("error_net", ErrorNet, "error.")):
         cfg = meta.get(key)
         want = ("dim", "hidden") if key == "error_net" else ("dim", "n_offsets", "n_components", "hidden", "depth")
+        if key == "net" and isinstance(cfg, dict) and "members" in cfg:  # files before the ensemble: one member
+            want += ("members",)
         if not isinstance(cfg, dict) or sorted(cfg) != sorted(want) or not all(
                 isinstance(cfg[k], int) and not isinstance(cfg[k], bool) and 1 <= cfg[k] <= 4096 for k in want):
             raise ValueError(f"{src}: meta.json field 'summary.{key}' must hold the integers {', '.join(want)}")
@@ -232,6 +234,8 @@ def from_parts(meta: dict, state: dict, class_name: str, acquisition: Acquisitio
                              f"{label_free.dim} label-free quantities")
         net = cls_(**cfg)
         sub = {k[len(prefix):]: v for k, v in state.items() if k.startswith(prefix)}
+        if key == "net":
+            sub = Emulator.upgrade_state(sub)
         try:
             net.load_state_dict(sub)
         except (RuntimeError, KeyError, TypeError) as exc:

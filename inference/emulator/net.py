@@ -50,30 +50,76 @@ def _early_stopping(net: nn.Module, epoch, validate, *, epochs: int, patience: i
 
 
 class Emulator(nn.Module):
-    """u (n, d), sketch (n, F) -> mean whitened summary (n, D) (module doc)."""
+    """u (n, d), sketch (n, F) -> mean whitened summary (n, D) (module doc).
 
-    def __init__(self, dim: int, n_offsets: int, n_components: int, hidden: int = 256, depth: int = 3):
+    The correction is the mean of ``members`` MLPs, each trained on its own seed (its
+    own validation split and batches) by :func:`fit` and joined by :meth:`stack`: a
+    bagged ensemble, whose members' errors partly cancel (QUAD K = 32, 18,400 drones:
+    held-out mean squared error 0.65-0.67 for one member, 0.50 for four)."""
+
+    def __init__(self, dim: int, n_offsets: int, n_components: int, hidden: int = 256, depth: int = 3,
+                 members: int = 1):
         super().__init__()
         self.dim, self.n_offsets, self.n_components = int(dim), int(n_offsets), int(n_components)
-        self.hidden, self.depth = int(hidden), int(depth)
-        self.register_buffer("in_mean", torch.zeros(dim + n_offsets))
-        self.register_buffer("in_sd", torch.ones(dim + n_offsets))
+        self.hidden, self.depth, self.members = int(hidden), int(depth), int(members)
+        if self.members < 1:
+            raise ValueError(f"members must be >= 1, got {members}")
+        self.register_buffer("in_mean", torch.zeros(self.members, dim + n_offsets))
+        self.register_buffer("in_sd", torch.ones(self.members, dim + n_offsets))
         self.register_buffer("sketch_basis", torch.zeros(n_components, n_offsets))
         self.register_buffer("sketch_centre", torch.zeros(n_offsets))
-        layers, width = [], dim + n_offsets
-        for _ in range(depth):
-            layers += [nn.Linear(width, hidden), nn.SiLU()]
-            width = hidden
-        layers.append(nn.Linear(width, n_components))
-        self.mlp = nn.Sequential(*layers)
+        self.mlps = nn.ModuleList([self._mlp() for _ in range(self.members)])
+
+    def _mlp(self) -> nn.Sequential:
+        layers, width = [], self.dim + self.n_offsets
+        for _ in range(self.depth):
+            layers += [nn.Linear(width, self.hidden), nn.SiLU()]
+            width = self.hidden
+        layers.append(nn.Linear(width, self.n_components))
+        return nn.Sequential(*layers)
 
     def config(self) -> dict:
         return {"dim": self.dim, "n_offsets": self.n_offsets, "n_components": self.n_components,
-                "hidden": self.hidden, "depth": self.depth}
+                "hidden": self.hidden, "depth": self.depth, "members": self.members}
 
     def forward(self, u: torch.Tensor, sk: torch.Tensor) -> torch.Tensor:
-        inp = (torch.cat([u, sk], dim=-1) - self.in_mean) / self.in_sd
-        return (sk - self.sketch_centre) @ self.sketch_basis.T + self.mlp(inp)
+        x = torch.cat([u, sk], dim=-1)
+        corr = sum(mlp((x - self.in_mean[k]) / self.in_sd[k]) for k, mlp in enumerate(self.mlps))
+        return (sk - self.sketch_centre) @ self.sketch_basis.T + corr / self.members
+
+    @classmethod
+    def stack(cls, nets: list["Emulator"]) -> "Emulator":
+        """One emulator whose correction is the mean of the given one-member emulators'
+        (same sizes and sketch projection)."""
+        first = nets[0]
+        if any(n.members != 1 or n.config() != first.config() for n in nets):
+            raise ValueError("stack takes one-member emulators of the same sizes")
+        cfg = dict(first.config(), members=len(nets))
+        out = cls(**cfg)
+        with torch.no_grad():
+            out.sketch_basis.copy_(first.sketch_basis)
+            out.sketch_centre.copy_(first.sketch_centre)
+            for k, n in enumerate(nets):
+                out.in_mean[k].copy_(n.in_mean[0])
+                out.in_sd[k].copy_(n.in_sd[0])
+                out.mlps[k].load_state_dict(n.mlps[0].state_dict())
+        return out.eval()
+
+    @staticmethod
+    def upgrade_state(state: dict) -> dict:
+        """A one-network state of files written before the ensemble (``mlp.*``, in_mean
+        (F,)) as the one-member state of this class (``mlps.0.*``, in_mean (1, F))."""
+        if not any(k.startswith("mlp.") for k in state):
+            return state
+        out = {}
+        for k, v in state.items():
+            if k.startswith("mlp."):
+                out["mlps.0." + k[4:]] = v
+            elif k in ("in_mean", "in_sd") and v.ndim == 1:
+                out[k] = v[None]
+            else:
+                out[k] = v
+        return out
 
 
 def fit(net: Emulator, u: np.ndarray, sk: np.ndarray, target: np.ndarray, *, seed: int, epochs: int = 300,
@@ -81,12 +127,14 @@ def fit(net: Emulator, u: np.ndarray, sk: np.ndarray, target: np.ndarray, *, see
     """Train ``net`` in place on (u, sketch) -> target (n, D); returns the history
     (train / validation loss per epoch, the best epoch). The validation split is the
     last ``val_share`` of a seeded permutation."""
+    if net.members != 1:
+        raise ValueError(f"fit trains a one-member emulator (Emulator.stack joins them), got {net.members} members")
     g = torch.Generator().manual_seed(int(seed))
     tr, va = _split(len(u), val_share, g)
     U, S, T = (torch.as_tensor(a, dtype=torch.float32) for a in (u, sk, target))
     x = torch.cat([U, S], 1)
-    net.in_mean.copy_(x[tr].mean(0))
-    net.in_sd.copy_(x[tr].std(0).clamp_min(1e-6))
+    net.in_mean[0].copy_(x[tr].mean(0))
+    net.in_sd[0].copy_(x[tr].std(0).clamp_min(1e-6))
     opt = torch.optim.Adam(net.parameters(), lr=lr)
     sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=0.5, patience=patience // 3)
 

@@ -50,6 +50,7 @@ class EmulatorConfig:
     n_components: int = 32
     hidden: int = 256
     depth: int = 3
+    members: int = 4
     cov_hidden: int = 256
     epochs: int = 300
     cov_epochs: int = 150
@@ -85,11 +86,20 @@ def train_summary_model(x: np.ndarray, profiles: np.ndarray, label_free, class_n
     wh = Whitening.fit(s[train], config.n_components)
     z_all = wh(s)  # (N, M, D)
     z = z_all.mean(1)
-    net = Emulator(label_free.dim, config.n_offsets, config.n_components, config.hidden, config.depth)
-    net.sketch_basis.copy_(torch.as_tensor(wh.basis, dtype=torch.float32))
-    net.sketch_centre.copy_(torch.as_tensor(wh.centre, dtype=torch.float32))
-    hist = fit(net, u[train], sk[train], z[train], seed=seed, epochs=config.epochs)
-    log(f"emulator: {len(train)} drones, best epoch {hist['best_epoch']}, validation mse {hist['best_val']:.4f}")
+    nets, hists = [], []
+    for k in range(config.members):  # a bagged ensemble: each member its own seed (split, batches, start)
+        net = Emulator(label_free.dim, config.n_offsets, config.n_components, config.hidden, config.depth)
+        net.sketch_basis.copy_(torch.as_tensor(wh.basis, dtype=torch.float32))
+        net.sketch_centre.copy_(torch.as_tensor(wh.centre, dtype=torch.float32))
+        hists.append(fit(net, u[train], sk[train], z[train], seed=seed + k, epochs=config.epochs))
+        nets.append(net)
+    net = Emulator.stack(nets)
+    with torch.no_grad():
+        ens = net(torch.as_tensor(u[held_a], dtype=torch.float32), torch.as_tensor(sk[held_a], dtype=torch.float32))
+    ens_mse = float(((ens.double().numpy() - z[held_a]) ** 2).mean())
+    hist = {"best_epoch": [h["best_epoch"] for h in hists], "best_val": float(np.mean([h["best_val"] for h in hists]))}
+    log(f"emulator: {len(train)} drones, {config.members} member(s), best epochs {hist['best_epoch']}, validation mse "
+        f"{hist['best_val']:.4f} per member, {ens_mse:.4f} the ensemble's on {len(held_a)} held-out drones")
     cov_net = CovarianceNet(label_free.dim, config.n_offsets, config.n_components, config.cov_hidden)
     chist = fit_covariance(cov_net, u[train], sk[train], z_all[train], seed=seed, epochs=config.cov_epochs)
     log(f"within-drone covariance: best epoch {chist['best_epoch']}, validation nll {chist['best_val']:.4f}")
@@ -121,6 +131,7 @@ def train_summary_model(x: np.ndarray, profiles: np.ndarray, label_free, class_n
             f"w(u) median {np.median(w):.2f}, 10-90% {np.quantile(w, 0.1):.2f}-{np.quantile(w, 0.9):.2f}")
     report = {"config": config.to_dict(), "n_drones": int(n), "n_train": int(len(train)),
               "emulator_best_epoch": hist["best_epoch"], "emulator_val_mse": float(hist["best_val"]),
+              "emulator_held_out_mse": ens_mse,
               "covariance_best_epoch": chist["best_epoch"], "covariance_val_nll": float(chist["best_val"]),
               "error_pooled": [alpha, beta], "error_best_epoch": ehist["best_epoch"], "chi2_median_ratio": ratio,
               "chi2_q90_ratio": float(np.quantile(chi, 0.9) / chi2.ppf(0.9, config.n_components)),
