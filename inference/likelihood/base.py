@@ -13,6 +13,9 @@ import numpy as np
 
 from ...radar import RadarConfig, centred_slices, normalise
 
+LOG_2PI = float(np.log(2 * np.pi))
+"""log(2 pi): the Gaussian normaliser of every likelihood of this room."""
+
 
 def prepare_measured(profiles, radar: RadarConfig, normalisation: str, what: str = "measured profiles"):
     """Check and normalise measured linear-magnitude profiles.

@@ -43,10 +43,9 @@ from ...generator.acquisition import Acquisition, noise_sigma
 from ...generator.line_moments import SUM_NAMES, line_sums
 from ...generator.magnitude import magnitude_moments
 from ...radar import RadarConfig
-from .base import LogPosteriorBase, MarginalLikelihood
+from .base import LOG_2PI, LogPosteriorBase, MarginalLikelihood
 from ..space.layout import Layout
 
-LOG_2PI = float(np.log(2 * np.pi))
 _S = {name: i for i, name in enumerate(SUM_NAMES)}
 
 

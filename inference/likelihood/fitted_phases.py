@@ -17,10 +17,9 @@ from ...generator import profiles as model_profiles
 from ...generator import spectra as model_spectra
 from ...generator.acquisition import Acquisition
 from ...radar import RadarConfig, normalise
-from .base import LogPosteriorBase
+from .base import LOG_2PI, LogPosteriorBase
 from ..space.layout import Layout
 
-LOG_2PI = float(np.log(2 * np.pi))
 ALIGNMENTS = ("tone", "peak")
 
 

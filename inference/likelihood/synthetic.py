@@ -38,10 +38,8 @@ import numpy as np
 from ...generator.acquisition import Acquisition
 from ...generator.synthetic import SyntheticDraws
 from ...radar import RadarConfig
-from .base import MarginalLikelihood
+from .base import LOG_2PI, MarginalLikelihood
 from ..space.layout import Layout
-
-LOG_2PI = float(np.log(2 * np.pi))
 
 
 def shrinkage_intensity(dev: np.ndarray) -> np.ndarray:
