@@ -224,7 +224,7 @@ def from_parts(meta: dict, state: dict, class_name: str, acquisition: Acquisitio
                               ("error_net", ErrorNet, "error.")):
         cfg = meta.get(key)
         want = ("dim", "hidden") if key == "error_net" else ("dim", "n_offsets", "n_components", "hidden", "depth")
-        if key == "net" and isinstance(cfg, dict) and "members" in cfg:  # files before the ensemble: one member
+        if key == "net" and isinstance(cfg, dict) and "members" in cfg:  # absent from files before the ensemble (one member)
             want += ("members",)
         if not isinstance(cfg, dict) or sorted(cfg) != sorted(want) or not all(
                 isinstance(cfg[k], int) and not isinstance(cfg[k], bool) and 1 <= cfg[k] <= 4096 for k in want):
