@@ -94,18 +94,17 @@ def train_summary_model(x: np.ndarray, profiles: np.ndarray, label_free, class_n
         hists.append(fit(net, u[train], sk[train], z[train], seed=seed + k, epochs=config.epochs))
         nets.append(net)
     net = Emulator.stack(nets)
-    with torch.no_grad():
-        ens = net(torch.as_tensor(u[held_a], dtype=torch.float32), torch.as_tensor(sk[held_a], dtype=torch.float32))
-    ens_mse = float(((ens.double().numpy() - z[held_a]) ** 2).mean())
-    hist = {"best_epoch": [h["best_epoch"] for h in hists], "best_val": float(np.mean([h["best_val"] for h in hists]))}
-    log(f"emulator: {len(train)} drones, {config.members} member(s), best epochs {hist['best_epoch']}, validation mse "
-        f"{hist['best_val']:.4f} per member, {ens_mse:.4f} the ensemble's on {len(held_a)} held-out drones")
+    best_epochs, member_val = [h["best_epoch"] for h in hists], float(np.mean([h["best_val"] for h in hists]))
+    log(f"emulator: {len(train)} drones, {config.members} member(s), best epochs {best_epochs}, validation mse "
+        f"{member_val:.4f} per member")
     cov_net = CovarianceNet(label_free.dim, config.n_offsets, config.n_components, config.cov_hidden)
     chist = fit_covariance(cov_net, u[train], sk[train], z_all[train], seed=seed, epochs=config.cov_epochs)
     log(f"within-drone covariance: best epoch {chist['best_epoch']}, validation nll {chist['best_val']:.4f}")
     error_net = ErrorNet(label_free.dim)
     model = SummaryModel(class_name, acquisition, radar, label_free, wh, net, cov_net, error_net)
     mean_a, w_a, _ = model.nets(u[held_a])
+    ens_mse = float(((mean_a - z[held_a]) ** 2).mean())
+    log(f"emulator: the ensemble's mean squared error on {len(held_a)} held-out drones {ens_mse:.4f}")
     alpha, beta = _error_model(w_a, z[held_a] - mean_a, m)
     ehist = fit_error(error_net, u[held_a], w_a, z[held_a] - mean_a, m, start=(alpha, beta), seed=seed)
     ab = model.nets(u[held_a])[2]  # the fitted error network's
@@ -130,7 +129,7 @@ def train_summary_model(x: np.ndarray, profiles: np.ndarray, label_free, class_n
             f"{chi2.median(label_free.dim):.2f}), q90 {np.quantile(gaps, 0.9):.2f} ({chi2.ppf(0.9, label_free.dim):.2f}); "
             f"w(u) median {np.median(w):.2f}, 10-90% {np.quantile(w, 0.1):.2f}-{np.quantile(w, 0.9):.2f}")
     report = {"config": config.to_dict(), "n_drones": int(n), "n_train": int(len(train)),
-              "emulator_best_epoch": hist["best_epoch"], "emulator_val_mse": float(hist["best_val"]),
+              "emulator_best_epoch": best_epochs, "emulator_val_mse": member_val,
               "emulator_held_out_mse": ens_mse,
               "covariance_best_epoch": chist["best_epoch"], "covariance_val_nll": float(chist["best_val"]),
               "error_pooled": [alpha, beta], "error_best_epoch": ehist["best_epoch"], "chi2_median_ratio": ratio,
