@@ -75,8 +75,10 @@ def report_amortized(args, res, drones, caught) -> int:
         warn("calibrate", f"the chain did not converge ({res.diagnostics['reason']}); {args.out} is flagged "
                           "not converged")
         return 0 if args.allow_unconverged else EXIT_NOT_CONVERGED
+    from ..inference.result.status import smc_role
+
     smc = res.diagnostics.get("smc", {})
     if smc and not smc.get("converged") and res.diagnostics.get("route") == "amortized":
-        warn("calibrate", f"the smc route, run as a check, did not converge ({smc.get('reason')}); the "
+        warn("calibrate", f"the smc route, {smc_role(res.diagnostics)}, did not converge ({smc.get('reason')}); the "
                           "posterior used is the amortized one")
     return 0

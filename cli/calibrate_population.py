@@ -95,7 +95,7 @@ def run_population(args, profiles, drones, settings, acquisition, method: str = 
                 from ..inference.amortized.calibrate import calibrate_amortized
 
                 res = calibrate_amortized(rows, cls, acquisition=acquisition, estimator=args.estimator,
-                                          settings=settings, random_state=seed, route=args.route,
+                                          settings=settings, random_state=seed, route=args.route, fit=False,
                                           source=f"{args.measured} (drone {drone})").record_specimens([drone])
             else:
                 res = calibrate(rows, cls, engines=args.engines, settings=settings, acquisition=acquisition,

@@ -80,7 +80,8 @@ def calibrate_class(job: dict) -> dict:
             with warnings.catch_warnings():  # every drone by the estimator's default route, nothing beside it
                 warnings.simplefilter("ignore", UserWarning)
                 res = calibrate_amortized(X[drones == drone], cls, acquisition=job["acquisition"],
-                                          settings=job["settings"], random_state=seed).record_specimens([drone])
+                                          settings=job["settings"], random_state=seed,
+                                          fit=k == 0).record_specimens([drone])  # the first drone's fit: sigma_p_fit's
         else:
             res = calibrate(X[drones == drone], cls, acquisition=job["acquisition"], settings=job["settings"],
                             random_state=seed, backend_path=checkpoint).record_specimens([drone])

@@ -158,7 +158,7 @@ def _calibration_text(cls: str, v: dict) -> str:
     """One class's calibration in a line: its status in the words of every other place
     (:func:`mdaug.inference.result.status.calibration_status`), the stored SBC, the
     sampled run where there is one (:func:`~mdaug.inference.result.status.run_facts`),
-    and the route run as a check."""
+    and the route run beside it (for the best fit or as a check)."""
     from ..inference.result.status import calibration_status, run_facts
 
     st = calibration_status(v)

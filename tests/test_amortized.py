@@ -16,7 +16,8 @@ from mdaug.inference.amortized.nets import NetConfig  # noqa: E402
 from mdaug.inference.amortized.simulate import SimulationSpec, simulate  # noqa: E402
 from mdaug.inference.amortized.target import DroneSpace, LabelFree  # noqa: E402
 from mdaug.inference.emulator.train import EmulatorConfig  # noqa: E402
-from mdaug.inference.space.priors import Priors, engine_lines  # noqa: E402
+from mdaug.generator import IDX  # noqa: E402
+from mdaug.inference.space.priors import SHARED, Priors, engine_lines  # noqa: E402
 
 TINY = NetConfig(channels=(2, 4, 4, 4), trial_out=8, set_hidden=16, set_out=8, flow_hidden=16, flow_transforms=2,
                  ratio_hidden=16)
@@ -342,7 +343,8 @@ def test_calibrate_verb_writes_an_amortized_posterior(tiny, tmp_path, capsys):
     text = capsys.readouterr()
     assert status == 0, text.err
     assert "posterior used by the strategies: amortized" in text.out
-    assert "tempered SMC" not in text.out.split("posterior used")[0]  # the default route only: nothing ran beside it
+    # the file has a summary likelihood: its smc route runs beside, for the best fit only (no draws kept)
+    assert "tempered SMC from the amortized posterior on the summary likelihood (run for the best fit)" in text.out
     res = CalibrationResult.load(out, class_name="HELI")  # check_content: variables, dims, prior bounds
     assert res.amortized and res.marginal and res.n_measurements == 3
     assert res.draws().shape == (4000, 13)
@@ -353,7 +355,8 @@ def test_calibrate_verb_writes_an_amortized_posterior(tiny, tmp_path, capsys):
                    "--time-budget", "20", "--seed", "5", "--check-route"])
     text = capsys.readouterr()
     assert status == 0, text.err
-    assert "tempered SMC from the amortized posterior on the summary likelihood (run as a check)" in text.out
+    assert ("tempered SMC from the amortized posterior on the summary likelihood (run for the best fit and as a "
+            "check)") in text.out
     assert "other_route" in CalibrationResult.load(checked, class_name="HELI").idata.groups()
 
 
@@ -599,6 +602,39 @@ def test_smc_route_on_the_summary_likelihood_reports_its_run_and_status(tiny):
     assert status.headline.startswith("smc route: ")
     assert "tempered SMC from the amortized posterior on the summary likelihood (the route used): 200 particles" \
         in res.report()
+
+
+def test_the_best_fit_beside_the_amortized_route_is_the_summary_likelihoods_smc_median(tiny):
+    """A file with a summary likelihood, amortized route: the smc route still runs, for
+    the best fit only (its draws are not stored unless asked as a check); with the check
+    its draws are the other route, and the best fit is their median, not the amortized
+    posterior's; fit=False leaves the amortized median and runs nothing else."""
+    from mdaug.inference.amortized.calibrate import calibrate_amortized
+    from mdaug.inference.result.status import calibration_status
+    from mdaug.inference.settings import CalibrationSettings
+
+    est, _ = tiny
+    _, y = simulate(est.spec, 1, 22)
+    settings = CalibrationSettings(time_budget=20, progress=False).with_plugin("smc", n_particles=200)
+    kw = dict(acquisition=est.spec.acquisition, estimator=est, route="amortized", settings=settings, random_state=4)
+    fit = calibrate_amortized(y[0], "HELI", **kw)
+    d = fit.diagnostics
+    assert d["route"] == "amortized" and d["best_fit_from"] == "smc" and d["smc"]["particles"] == 200
+    assert "other_route" not in fit.idata.groups()
+    assert calibration_status(fit).check.startswith("smc route, run for the best fit: ")
+    assert "(run for the best fit): 200 particles" in fit.report()
+    assert "best fit (sigma_p_fit's centre): the smc route's median" in fit.report()
+    checked = calibrate_amortized(y[0], "HELI", check=True, **kw)
+    best = checked.best_fit.reshape(-1, 13)
+    for n in ("Gamma",) + SHARED:  # the smc draws, kept as the other route
+        np.testing.assert_allclose(best[:, IDX[n]], np.median(checked.idata.other_route[n].values[0], axis=0))
+    np.testing.assert_allclose(fit.best_fit, checked.best_fit)  # the same seeds: the same smc run
+    assert not np.allclose(fit.best_fit, np.median(fit.draws(), axis=0))
+    assert "(run for the best fit and as a check)" in checked.report()
+    assert calibration_status(checked).check.startswith("smc route, run for the best fit and as a check: ")
+    plain = calibrate_amortized(y[0], "HELI", fit=False, **kw)
+    assert plain.diagnostics["best_fit_from"] == "amortized" and "smc" not in plain.diagnostics
+    np.testing.assert_allclose(plain.best_fit, np.median(plain.draws(), axis=0))
 
 
 def test_a_plugged_in_covariance_is_held_for_every_u(tiny):

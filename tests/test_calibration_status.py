@@ -175,6 +175,10 @@ def test_the_check_route_keeps_its_own_words():
     st = calibration_status(d)
     assert st.check == "smc route, run as a check: NOT converged" and st.check_detail == "budget"
     assert st.headline == "amortized route: exact draws; SBC: honest"  # the check is not the route used
+    d["check"], d["best_fit_from"] = False, "smc"  # run for the best fit only (a file with a summary likelihood)
+    assert calibration_status(d).check == "smc route, run for the best fit: NOT converged"
+    d["check"] = True
+    assert calibration_status(d).check == "smc route, run for the best fit and as a check: NOT converged"
     del d["smc"]
     assert calibration_status(d).check == ""
 

@@ -34,13 +34,15 @@ def corner_title(res, status=None) -> str:
 def corner_markers(res, truths) -> list[tuple[str, str, np.ndarray]]:
     """What the corner marks beside the quantiles: (label, colour, engine vectors (E, 13)).
     The true values where they are known (simulated data); the global fit only for the
-    closed-form route (the amortized and smc routes have no fit of their own: their
-    'best fit' is the posterior median, which the 50% line shows)."""
+    closed-form route, and the smc median where it is the best fit beside the amortized
+    posterior (otherwise the best fit is the posterior median, which the 50% line shows)."""
     marks = []
     if truths is not None:
         marks.append(("true values (the simulated drone)", "C2", np.asarray(truths, float)))
     if not res.amortized:
         marks.append(("best fit (global fit)", "C3", res.best_fit))
+    elif res.diagnostics.get("best_fit_from", res.diagnostics.get("route")) != res.diagnostics.get("route"):
+        marks.append(("best fit (the summary likelihood's smc median)", "C3", res.best_fit))
     return [(label, c, x.reshape(-1)[: res.n_engines * N_PARAMS].reshape(res.n_engines, N_PARAMS))
             for label, c, x in marks]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .status import calibration_status, chain_words
+from .status import calibration_status, chain_words, smc_role
 
 SUMMARY_UNITS = {"Gamma": "rel.", "A": "m", "w": "rad/s", "C": "ratio", "phi": "rad", "offset": "bins",
                  "carrier": "x sum Gamma", "noise_db": "dB", "sigma": "peak = 1"}
@@ -83,12 +83,14 @@ def amortized_report(res, identified_ratio: float) -> str:
         m = d["smc"]
         which = {"summary": "the summary likelihood", "ratio": "the learned likelihood ratio"}.get(
             m.get("likelihood", "ratio"), "the learned likelihood")
-        role = "the route used" if d["route"] == "smc" else "run as a check"
+        role = "the route used" if d["route"] == "smc" else smc_role(d)
         lines.append(f"tempered SMC from the amortized posterior on {which} ({role}): "
                      f"{m['particles']} particles, {m['stages']} stages ({m['seconds']:.1f} s), unique share "
                      f"{m['unique_share']:.2f}, last acceptance {m['acceptance_last']:.2f}: "
                      + "{}: {}".format(*chain_words(m["converged"], m["reason"])))
-    lines.append(f"posterior used by the strategies: {d['route']} route")
+    lines.append(f"posterior used by the strategies: {d['route']} route"
+                 + ("; best fit (sigma_p_fit's centre): the smc route's median" if d.get("best_fit_from", d["route"])
+                    != d["route"] else ""))
     lines += calibration_status(res).lines()
     if d.get("widths"):
         lines.append("label-free quantities (the lines sorted by frequency; rad/s and m): median, 90% interval, "

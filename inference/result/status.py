@@ -84,18 +84,21 @@ class CalibrationStatus:
     out_of_range: bool
     out_of_range_why: str
     check_route: str
-    """The other route when it ran as a check ('smc'; 'emcee' in earlier files), else ''."""
+    """The other route when it ran beside the amortized one ('smc'; 'emcee' in earlier
+    files), for the best fit or as a check (``check_role``), else ''."""
     check_convergence: str
     """Its convergence word ('converged' or 'NOT converged'; '' when it did not run)."""
     check_detail: str
     """Its sampler's reason."""
+    check_role: str = ""
+    """Why it ran: 'run for the best fit', 'run as a check' or both (:func:`smc_role`)."""
 
     @property
     def check(self) -> str:
-        """The route run as a check in words ('' when none ran)."""
+        """The route run beside the one used, in words ('' when none ran)."""
         if not self.check_route:
             return ""
-        return f"{self.check_route} route, run as a check: {self.check_convergence}"
+        return f"{self.check_route} route, {self.check_role or 'run as a check'}: {self.check_convergence}"
 
     @property
     def headline(self) -> str:
@@ -171,6 +174,15 @@ def run_facts(d: dict, num=None) -> str:
     return ", ".join(label.format(num(key, value, dec)) for key, value, dec, label in parts)
 
 
+def smc_role(d: dict) -> str:
+    """Why the smc route ran beside the amortized route of diagnostics ``d``: for the
+    best fit (the summary likelihood's median, :mod:`mdaug.inference.amortized.calibrate`),
+    as a check, or both."""
+    why = ["for the best fit"] if d.get("best_fit_from") == "smc" else []
+    why += ["as a check"] if d.get("check", True) else []  # without 'check' (earlier files): a check
+    return "run " + " and ".join(why or ["as a check"])
+
+
 def chain_words(converged: bool, reason: str) -> tuple[str, str]:
     """('converged' or 'NOT converged', the reason without a status prefix)."""
     return (CONVERGED if converged else NOT_CONVERGED), _strip(reason)
@@ -225,7 +237,8 @@ def calibration_status(source) -> CalibrationStatus:
                              convergence_detail=detail, honesty=honesty, passed=passed, sbc=sbc, rank_note=note,
                              out_of_range=bool(d.get("out_of_range", False)),
                              out_of_range_why=str(d.get("out_of_range_why") or ""), check_route=check[0],
-                             check_convergence=check[1], check_detail=check[2])
+                             check_convergence=check[1], check_detail=check[2],
+                             check_role=smc_role(d) if check[0] else "")
 
 
 def _strip(reason: str) -> str:
