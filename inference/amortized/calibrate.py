@@ -11,11 +11,11 @@ takes the file's default route (named by its route table,
 other route runs too and lands in the group ``other_route``, with its diagnostics in
 the metadata. Where the file has a summary likelihood and the route is the amortized
 one, the smc route still runs (``fit=True``, the default) for the **best fit**: the
-median of its draws, the centre of the sigma_p_fit strategy (on 11 QUAD K = 32 drones
-of the specimen model the amortized median's brightest-engine lines 1-4 were a median
-67 / 15 / 34 / 40% off, the smc median's 23 / 7 / 7 / 8%: the amortized QUAD posterior
-is near its prior). Its draws are
-not the posterior then (the route table keeps the amortized route, honest by SBC);
+median of its draws, the centre of the sigma_p_fit strategy (``tests/benchmarks/best_fit.py``:
+on 11 QUAD K = 32 drones of the specimen model the amortized median's brightest-engine
+lines 1-4 were a median 66 / 14 / 32 / 36% off, the smc median's 27 / 6 / 9 / 11%: the
+amortized QUAD posterior is near its prior). Its draws are not the posterior then (the
+route table keeps the amortized route, honest by SBC);
 ``diagnostics['best_fit_from']`` names the route the best fit came from. All are in
 the class-vector variables of every mdaug posterior (Gamma, A_a, ..., C_m per engine,
 phases marginalised).
