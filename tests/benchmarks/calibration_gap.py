@@ -11,6 +11,8 @@ are trained on it and scored (balanced accuracy, per-class recall) on the study'
 'select' and 'new_large' sets:
 
 * ``reference``: the class reference drone only (what the whole method can reach);
+* ``best fit``: the study's best fit only (the ``sigma_p_fit`` strategy's source at
+  sigma_P = 0: the smc median of the summary likelihood where the estimator has one);
 * ``posterior``: the study's posterior draws (the ``posterior`` strategy's source, without
   its smoothing jitter);
 * ``posterior at the reference, x s``: the posterior's spread in the label-free
@@ -47,7 +49,7 @@ def vector_sources(study: str, shrinks) -> dict:
     from mdaug.generator import load_reference
     from mdaug.inference.result.augment import load_posterior
 
-    rows = {"reference": {}, "posterior": {}}
+    rows = {"reference": {}, "best fit": {}, "posterior": {}}
     rows.update({f"posterior at the reference, x {s:g}": {} for s in shrinks})
     for cls in CLASSES:
         ref = load_reference(cls)
@@ -55,6 +57,7 @@ def vector_sources(study: str, shrinks) -> dict:
         post = load_posterior(os.path.join(study, "posteriors", f"{cls}.nc"), cls)
         x = np.concatenate([post.draws(measurement=m) for m in range(post.n_measurements)])
         rows["reference"][cls] = ref.to_array()[None]
+        rows["best fit"][cls] = post.best_fit[None]
         rows["posterior"][cls] = x
         u = lf.to_unbounded(lf.quantities(x))
         u = u[np.all(np.isfinite(u), axis=1)]
