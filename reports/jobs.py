@@ -77,11 +77,13 @@ def calibrate_class(job: dict) -> dict:
         checkpoint = out / "posteriors" / f"{name}.chain.h5"
         seed = job["seed"] if k == 0 else child_seed(job["seed"], "drone", drone)
         if amortized:  # an out-of-range warning lands in the diagnostics, which the report shows
-            with warnings.catch_warnings():  # every drone by the estimator's default route, nothing beside it
+            # every drone by the estimator's default route; beside it, for the first drone only, the
+            # smc run whose median is sigma_p_fit's centre (where the file has a summary likelihood)
+            with warnings.catch_warnings():
                 warnings.simplefilter("ignore", UserWarning)
                 res = calibrate_amortized(X[drones == drone], cls, acquisition=job["acquisition"],
                                           settings=job["settings"], random_state=seed,
-                                          fit=k == 0).record_specimens([drone])  # the first drone's fit: sigma_p_fit's
+                                          fit=k == 0).record_specimens([drone])
         else:
             res = calibrate(X[drones == drone], cls, acquisition=job["acquisition"], settings=job["settings"],
                             random_state=seed, backend_path=checkpoint).record_specimens([drone])
