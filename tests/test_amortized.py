@@ -604,6 +604,7 @@ def test_smc_route_on_the_summary_likelihood_reports_its_run_and_status(tiny):
         in res.report()
 
 
+@pytest.mark.filterwarnings("ignore:.*unlike the estimator's training set")  # a tiny, two-epoch estimator
 def test_the_best_fit_beside_the_amortized_route_is_the_summary_likelihoods_smc_median(tiny):
     """A file with a summary likelihood, amortized route: the smc route still runs, for
     the best fit only (its draws are not stored unless asked as a check); with the check
