@@ -13,7 +13,7 @@ the metadata. Where the file has a summary likelihood and the route is the amort
 one, the smc route still runs (``fit=True``, the default) for the **best fit**: the
 median of its draws, the centre of the sigma_p_fit strategy (``tests/benchmarks/best_fit.py``:
 on 11 QUAD K = 32 drones of the specimen model the amortized median's brightest-engine
-lines 1-4 were a median 66 / 14 / 32 / 36% off, the smc median's 27 / 6 / 9 / 11%: the
+lines 1-4 were a median 67 / 14 / 32 / 36% off, the best fit's 37 / 11 / 9 / 10%: the
 amortized QUAD posterior is near its prior). Its draws are not the posterior then (the
 route table keeps the amortized route, honest by SBC);
 ``diagnostics['best_fit_from']`` names the route the best fit came from. All are in
