@@ -626,16 +626,56 @@ def test_the_best_fit_beside_the_amortized_route_is_the_summary_likelihoods_smc_
     assert "(run for the best fit): 200 particles" in fit.report()
     assert "best fit (sigma_p_fit's centre): the smc route's median" in fit.report()
     checked = calibrate_amortized(y[0], "HELI", check=True, **kw)
-    best = checked.best_fit.reshape(-1, 13)
-    for n in ("Gamma",) + SHARED:  # the smc draws, kept as the other route
-        np.testing.assert_allclose(best[:, IDX[n]], np.median(checked.idata.other_route[n].values[0], axis=0))
+    other = np.zeros((checked.idata.other_route["Gamma"].size, 13))  # the smc draws, kept as the other route
+    for n in ("Gamma",) + SHARED:
+        other[:, IDX[n]] = checked.idata.other_route[n].values.reshape(-1)
+    lf = est.label_free
+    assert checked.diagnostics["best_fit_median"] == "label-free"
+    np.testing.assert_allclose(lf.quantities(checked.best_fit[None])[0], np.median(lf.quantities(other), axis=0))
     np.testing.assert_allclose(fit.best_fit, checked.best_fit)  # the same seeds: the same smc run
-    assert not np.allclose(fit.best_fit, np.median(fit.draws(), axis=0))
+    assert not np.allclose(lf.quantities(fit.best_fit[None])[0], np.median(lf.quantities(fit.draws()), axis=0))
     assert "(run for the best fit and as a check)" in checked.report()
     assert calibration_status(checked).check.startswith("smc route, run for the best fit and as a check: ")
     plain = calibrate_amortized(y[0], "HELI", fit=False, **kw)
     assert plain.diagnostics["best_fit_from"] == "amortized" and "smc" not in plain.diagnostics
-    np.testing.assert_allclose(plain.best_fit, np.median(plain.draws(), axis=0))
+    np.testing.assert_allclose(lf.quantities(plain.best_fit[None])[0], np.median(lf.quantities(plain.draws()), axis=0))
+
+
+def test_the_best_fit_is_the_label_free_median_not_a_mix_of_labellings():
+    """Draws of one drone whose lines carry two labellings (roll and pitch swapped in
+    half of them, as a posterior over label-free lines does): the component-wise
+    median of the class vectors lands between the lines, the label-free median is the
+    drone; medians that no labelling fits fall back to the component-wise median."""
+    from mdaug.inference.amortized.calibrate import label_free_median
+
+    ref = load_reference("HELI")
+    pr = Priors.from_reference(ref)
+    lf = LabelFree(1, pr, ref.to_array())
+    q0 = lf.quantities(ref.to_array()[None])
+    wp, ap, _, _, cp, cm, valid = lf._labellings(q0[:, :4], q0[:, 4:8])
+    w_ref, _, _ = engine_lines(ref.to_array()[None])
+    second = next(k for k in np.flatnonzero(valid[0]) if not np.allclose(wp[0, k], w_ref[0]))  # another labelling
+    alt = ref.to_array().copy()
+    for role, col in enumerate("abpm"):
+        alt[IDX[f"A_{col}"]] = ap[0, second, role]
+    alt[IDX["w_a"]], alt[IDX["w_b"]], alt[IDX["C_p"]], alt[IDX["C_m"]] = *wp[0, second, :2], cp[0, second], cm[0, second]
+    rng = np.random.default_rng(0)
+    q = q0 * (1 + 0.01 * rng.standard_normal((400, q0.shape[1])))
+    q[:, :4] = np.sort(q[:, :4], axis=1)
+    x, ok = lf.vectors(q)
+    swapped, ok2 = LabelFree(1, pr, alt).vectors(q)  # the same lines, the other labelling
+    assert ok.all() and ok2.all() and not np.allclose(x, swapped)
+    mixed = np.concatenate([x[:200], swapped[200:]])
+    np.testing.assert_allclose(lf.quantities(mixed), q, rtol=1e-9)  # label-free: the same draws
+    best, how = label_free_median(lf, mixed)
+    assert how == "label-free"
+    np.testing.assert_allclose(lf.quantities(best[None])[0], np.median(q, axis=0), rtol=1e-9)
+    err = lambda v: np.max(np.abs(lf.quantities(v[None])[0, :4] / q0[0, :4] - 1))  # noqa: E731
+    assert err(np.median(mixed, axis=0)) > 0.1 > 0.03 > err(best)
+    bad = x.copy()
+    bad[:, [IDX[f"A_{r}"] for r in "abpm"]] = 10 * pr.bounds["A_a"][1]  # amplitudes no labelling allows
+    _, how = label_free_median(lf, bad)
+    assert how == "component-wise"
 
 
 def test_a_plugged_in_covariance_is_held_for_every_u(tiny):

@@ -177,6 +177,7 @@ def test_the_check_route_keeps_its_own_words():
     assert st.headline == "amortized route: exact draws; SBC: honest"  # the check is not the route used
     d["check"], d["best_fit_from"] = False, "smc"  # run for the best fit only (a file with a summary likelihood)
     assert calibration_status(d).check == "smc route, run for the best fit: NOT converged"
+    assert "  WARNING: smc route, run for the best fit: NOT converged (budget)" in calibration_status(d).lines()
     d["check"] = True
     assert calibration_status(d).check == "smc route, run for the best fit and as a check: NOT converged"
     del d["smc"]

@@ -90,7 +90,9 @@ def amortized_report(res, identified_ratio: float) -> str:
                      + "{}: {}".format(*chain_words(m["converged"], m["reason"])))
     lines.append(f"posterior used by the strategies: {d['route']} route"
                  + ("; best fit (sigma_p_fit's centre): the smc route's median" if d.get("best_fit_from", d["route"])
-                    != d["route"] else ""))
+                    != d["route"] else "")
+                 + (" (component-wise: no labelling of the label-free median fits the prior)"
+                    if d.get("best_fit_median") == "component-wise" else ""))
     lines += calibration_status(res).lines()
     if d.get("widths"):
         lines.append("label-free quantities (the lines sorted by frequency; rad/s and m): median, 90% interval, "

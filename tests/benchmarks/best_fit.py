@@ -6,9 +6,10 @@ Drones of the specimen model around the class reference (as the study draws new 
 5 measurements each), each calibrated as ``mdaug calibrate`` does it
 (:func:`mdaug.inference.amortized.calibrate.calibrate_amortized`, the file's default
 route, seeded by --seed + i). Prints |x - truth| / truth of the brightest engine's four
-sorted lines for the calibration's best fit (``best_fit``: the smc median where the file
-has a summary likelihood, ``diagnostics['best_fit_from']``) and for the median of the
-posterior's draws, per drone and the medians, and the seconds of each smc run (1 thread).
+sorted lines for the calibration's best fit (``best_fit``: the label-free median of the
+smc draws where the file has a summary likelihood, ``diagnostics['best_fit_from']``) and
+for the label-free median of the posterior's draws (the same where the posterior is the
+smc route's), per drone and the medians, and the seconds of each smc run (1 thread).
 """
 from __future__ import annotations
 
