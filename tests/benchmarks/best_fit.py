@@ -10,6 +10,19 @@ sorted lines for the calibration's best fit (``best_fit``: the label-free median
 smc draws where the file has a summary likelihood, ``diagnostics['best_fit_from']``) and
 for the label-free median of the posterior's draws (the same where the posterior is the
 smc route's), per drone and the medians, and the seconds of each smc run (1 thread).
+
+--compare-medians: the smc draws are kept (``check=True``: the same seeds, the same run)
+and centres of them are compared on every engine's four lines, not the brightest alone,
+each engine of a centre matched to the true engine whose sorted lines are nearest (the
+brightness order swaps engines of about equal Gamma): the shipped best fit (the
+label-free median, :func:`mdaug.inference.amortized.calibrate.label_free_median`), the
+component-wise median of the class vectors (the best fit of earlier releases) and the
+amortized posterior's label-free median;
+and, where the file has a summary likelihood, how far each centre's expected summary lies
+from the truth's in the noise of 5 measurements (sqrt of (mu_c - mu_t)' Sigma_t^-1
+(mu_c - mu_t), the summary model's mean and covariance at the truth): a label-free
+distance in what the data carry, 1 about one noise sd of the summary. --save FILE keeps
+the truths and centres (npz).
 """
 from __future__ import annotations
 
@@ -29,7 +42,7 @@ def main(argv=None) -> int:
     import torch
 
     from mdaug.generator.acquisition import Acquisition
-    from mdaug.inference.amortized.calibrate import calibrate_amortized
+    from mdaug.inference.amortized.calibrate import calibrate_amortized, label_free_median
     from mdaug.inference.amortized.estimator import AmortizedEstimator
     from mdaug.inference.amortized.shipped import find
     from mdaug.inference.estimator_job import sbc_data
@@ -42,6 +55,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=31)
     ap.add_argument("--estimator", help="estimator file (default: the shipped one)")
     ap.add_argument("--workers", type=int, default=1, help="processes simulating the drones (the drones depend on it)")
+    ap.add_argument("--compare-medians", action="store_true", help="every engine: label-free vs component-wise median")
+    ap.add_argument("--save", help="npz file for the truths and centres (with --compare-medians)")
     a = ap.parse_args(argv)
     torch.set_num_threads(1)
     est = (AmortizedEstimator.load(a.estimator) if a.estimator
@@ -51,26 +66,94 @@ def main(argv=None) -> int:
     truths = lf.quantities(vectors)[:, :4]
     settings = CalibrationSettings(progress=False, time_budget=600)
     errors, seconds, source = {"best fit": [], "posterior median": []}, [], set()
-    print(f"{a.cls} K = {a.ramps}, {a.drones} specimen drones (seed {a.seed}): |x - truth| / truth, lines 1-4")
+    kept, dist = {}, {}
+    if a.compare_medians:
+        errors["component-wise"] = []
+    print(f"{a.cls} K = {a.ramps}, {a.drones} specimen drones (seed {a.seed}): |x - truth| / truth, "
+          + ("every engine's lines 1-4 (engines matched to the truth's)" if a.compare_medians else "lines 1-4"))
     for i, y in enumerate(profiles):
         res = calibrate_amortized(y, a.cls, acquisition=est.spec.acquisition, estimator=est, settings=settings,
-                                  random_state=a.seed + i)
+                                  random_state=a.seed + i, check=a.compare_medians)
         d = res.diagnostics
         source.add(f"{d['best_fit_from']} (posterior: {d['route']} route)")
         if "smc" in d:
             seconds.append(d["smc"]["seconds"])
-        errors["best fit"].append(lf.quantities(res.best_fit[None])[0, :4])
-        errors["posterior median"].append(np.median(lf.quantities(res.draws()), axis=0)[:4])
-        row = {k: np.round(np.abs(v[-1] - truths[i]) / truths[i], 3).tolist() for k, v in errors.items()}
-        print(f"  drone {i}: {row}", flush=True)
+        if not a.compare_medians:
+            errors["best fit"].append(np.abs(lf.quantities(res.best_fit[None])[0, :4] / truths[i] - 1))
+            errors["posterior median"].append(np.abs(np.median(lf.quantities(res.draws()), axis=0)[:4] / truths[i] - 1))
+        else:
+            smc = _smc_draws(res)
+            centres = {"best fit": res.best_fit, "posterior median": label_free_median(lf, res.draws())[0],
+                       "component-wise": np.median(smc, axis=0)}
+            for k, v in centres.items():
+                errors[k].append(_matched_lines(lf, v, vectors[i]))
+                kept.setdefault(k, []).append(v)
+                if est.summary is not None:
+                    dist.setdefault(k, []).append(_summary_distance(est, v, vectors[i]))
+        print(f"  drone {i}: " + ", ".join(f"{k} {np.mean(v[-1]):.3f}" for k, v in errors.items())
+              + " (mean |x - truth| / truth)", flush=True)
     print(f"best fit from: {', '.join(sorted(source))}")
     for k, v in errors.items():
-        e = np.abs(np.array(v) - truths) / truths
+        e = np.array(v)
         print(f"{k:17s} median {np.round(np.median(e, axis=0), 3).tolist()}  range "
-              f"{np.round(e.min(0), 2).tolist()} - {np.round(e.max(0), 2).tolist()}")
+              f"{np.round(e.min(0), 2).tolist()} - {np.round(e.max(0), 2).tolist()}"
+              + (f"  all lines: median {np.median(e):.3f}, mean {e.mean():.3f}" if a.compare_medians else ""))
+    for k, v in dist.items():
+        print(f"{k:17s} summary distance to the truth: median {np.median(v):.2f}, per drone {np.round(v, 2).tolist()}")
+    if a.save and kept:
+        np.savez(a.save, truths=vectors, **{k.replace(" ", "_").replace("-", "_"): np.array(v) for k, v in kept.items()})
     if seconds:
         print(f"smc run: median {np.median(seconds):.1f} s per drone (range {min(seconds):.1f}-{max(seconds):.1f})")
     return 0
+
+
+def _smc_draws(res):
+    """The smc route's draws as class vectors (n, 13E), from the posterior or, beside the
+    amortized route, from the ``other_route`` group (phases 0: marginalised)."""
+    import numpy as np
+
+    from mdaug.generator import IDX
+    from mdaug.inference.space.priors import SHARED
+
+    if res.diagnostics["route"] == "smc":
+        return res.draws()
+    g = res.idata.other_route
+    n, e = g["Gamma"].values.reshape(-1, res.n_engines).shape
+    x = np.zeros((n, e, 13))
+    for name in ("Gamma",) + SHARED:
+        x[:, :, IDX[name]] = g[name].values.reshape(n, e)
+    return x.reshape(n, e * 13)
+
+
+def _matched_lines(lf, x, truth):
+    """|w - w_true| / w_true (4E,) of class vector x's sorted lines against the truth's,
+    engines in the truth's brightness order, each of x's engines matched to the true
+    engine whose sorted lines are nearest (sum of |log w - log w_true|)."""
+    import itertools
+
+    import numpy as np
+
+    from mdaug.inference.space.priors import label_free_lines
+
+    e = lf.E
+    w = label_free_lines(np.reshape(x, (1, e, 13)), by_brightness=True)[0, :, :, 0]  # (E, 4)
+    wt = label_free_lines(np.reshape(truth, (1, e, 13)), by_brightness=True)[0, :, :, 0]
+    perm = min(itertools.permutations(range(e)), key=lambda p: np.abs(np.log(w[list(p)] / wt)).sum())
+    return np.abs(w[list(perm)] / wt - 1).reshape(-1)
+
+
+def _summary_distance(est, x, truth, n_measurements: int = 5) -> float:
+    """sqrt((mu(x) - mu(t))' Sigma(t)^-1 (mu(x) - mu(t))) in the file's summary model: the
+    expected whitened summary of drone x against the truth's, in the noise of the mean
+    of n measurements of the truth (no widening)."""
+    import numpy as np
+
+    lf, model = est.label_free, est.summary
+    u = lf.to_unbounded(lf.quantities(np.stack([x, truth])))
+    mu = model.mean(u)
+    _, cov = model.moments(u[1:], n_measurements, widen=False)
+    d = mu[0] - mu[1]
+    return float(np.sqrt(d @ np.linalg.solve(cov[0], d)))
 
 
 if __name__ == "__main__":
