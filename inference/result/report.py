@@ -91,7 +91,8 @@ def amortized_report(res, identified_ratio: float) -> str:
     lines.append(f"posterior used by the strategies: {d['route']} route"
                  + ("; best fit (sigma_p_fit's centre): the smc route's median" if d.get("best_fit_from", d["route"])
                     != d["route"] else "")
-                 + (" (component-wise: no labelling of the label-free median fits the prior)"
+                 + ("; best fit: the component-wise median of the draws (no labelling of their label-free "
+                    "median fits the prior)"
                     if d.get("best_fit_median") == "component-wise" else ""))
     lines += calibration_status(res).lines()
     if d.get("widths"):

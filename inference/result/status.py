@@ -137,7 +137,7 @@ class CalibrationStatus:
             out.append(("  " if self.converged else "  WARNING: ") + self.convergence
                        + (f": {self.convergence_detail}" if self.convergence_detail else ""))
         out.append(f"  SBC: {self.sbc_words}")
-        if self.check:  # an unconverged run beside: its best fit is its particles' median at a temperature < 1
+        if self.check:  # unconverged: a best fit from it is its particles' median at a temperature < 1
             out.append(("  WARNING: " if self.check_convergence == NOT_CONVERGED else "  ") + self.check
                        + (f" ({self.check_detail})" if self.check_detail else ""))
         if self.out_of_range:
