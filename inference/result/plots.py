@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...generator import N_PARAMS
+from .status import BEST_FIT_BESIDE, best_fit_beside
 
 PLOT_UNITS = {**{f"A_{r}": (f"A_{r} (mm)", 1e3) for r in "abpm"},
               **{f"w_{r}": (f"f_{r} (Hz)", 1 / (2 * np.pi)) for r in "ab"},
@@ -41,8 +42,8 @@ def corner_markers(res, truths) -> list[tuple[str, str, np.ndarray]]:
         marks.append(("true values (the simulated drone)", "C2", np.asarray(truths, float)))
     if not res.amortized:
         marks.append(("best fit (global fit)", "C3", res.best_fit))
-    elif res.diagnostics.get("best_fit_from", res.diagnostics.get("route")) != res.diagnostics.get("route"):
-        marks.append(("best fit (the summary likelihood's smc median)", "C3", res.best_fit))
+    elif best_fit_beside(res.diagnostics):
+        marks.append((f"best fit ({BEST_FIT_BESIDE})", "C3", res.best_fit))
     return [(label, c, x.reshape(-1)[: res.n_engines * N_PARAMS].reshape(res.n_engines, N_PARAMS))
             for label, c, x in marks]
 

@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .status import calibration_status, chain_words, smc_role
+from .status import (
+    BEST_FIT_BESIDE,
+    best_fit_beside,
+    calibration_status,
+    chain_words,
+    smc_role,
+)
 
 SUMMARY_UNITS = {"Gamma": "rel.", "A": "m", "w": "rad/s", "C": "ratio", "phi": "rad", "offset": "bins",
                  "carrier": "x sum Gamma", "noise_db": "dB", "sigma": "peak = 1"}
@@ -89,8 +95,7 @@ def amortized_report(res, identified_ratio: float) -> str:
                      f"{m['unique_share']:.2f}, last acceptance {m['acceptance_last']:.2f}: "
                      + "{}: {}".format(*chain_words(m["converged"], m["reason"])))
     lines.append(f"posterior used by the strategies: {d['route']} route"
-                 + ("; best fit (sigma_p_fit's centre): the smc route's median" if d.get("best_fit_from", d["route"])
-                    != d["route"] else "")
+                 + (f"; best fit (sigma_p_fit's centre): {BEST_FIT_BESIDE}" if best_fit_beside(d) else "")
                  + ("; best fit: the component-wise median of the draws (no labelling of their label-free "
                     "median fits the prior)"
                     if d.get("best_fit_median") == "component-wise" else ""))

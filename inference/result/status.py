@@ -175,6 +175,16 @@ def run_facts(d: dict, num=None) -> str:
     return ", ".join(label.format(num(key, value, dec)) for key, value, dec, label in parts)
 
 
+BEST_FIT_BESIDE = "the smc route's median"
+"""Where the best fit comes from when the smc route ran beside the amortized one for it."""
+
+
+def best_fit_beside(d: dict) -> bool:
+    """Whether the best fit of diagnostics ``d`` came from a route other than the one
+    used (the smc route's median beside the amortized posterior)."""
+    return d.get("best_fit_from", d.get("route")) != d.get("route")
+
+
 def smc_role(d: dict) -> str:
     """Why the smc route ran beside the amortized route of diagnostics ``d``: for the
     best fit (the summary likelihood's median, :mod:`mdaug.inference.amortized.calibrate`),
