@@ -17,7 +17,7 @@ from mdaug.inference.amortized.simulate import SimulationSpec, simulate  # noqa:
 from mdaug.inference.amortized.target import DroneSpace, LabelFree  # noqa: E402
 from mdaug.inference.emulator.train import EmulatorConfig  # noqa: E402
 from mdaug.generator import IDX  # noqa: E402
-from mdaug.inference.space.priors import SHARED, Priors, engine_lines  # noqa: E402
+from mdaug.inference.space.priors import Priors, engine_lines  # noqa: E402
 
 TINY = NetConfig(channels=(2, 4, 4, 4), trial_out=8, set_hidden=16, set_out=8, flow_hidden=16, flow_transforms=2,
                  ratio_hidden=16)
@@ -626,9 +626,11 @@ def test_the_best_fit_beside_the_amortized_route_is_the_summary_likelihoods_smc_
     assert "(run for the best fit): 200 particles" in fit.report()
     assert "best fit (sigma_p_fit's centre): the smc route's median" in fit.report()
     checked = calibrate_amortized(y[0], "HELI", check=True, **kw)
-    other = np.zeros((checked.idata.other_route["Gamma"].size, 13))  # the smc draws, kept as the other route
-    for n in ("Gamma",) + SHARED:
-        other[:, IDX[n]] = checked.idata.other_route[n].values.reshape(-1)
+    assert checked.groups == ("posterior", "other_route") and fit.groups == ("posterior",)
+    other = checked.draws(group="other_route")  # the smc draws, kept as the other route
+    assert other.shape == (checked.idata.other_route["Gamma"].size, 13) and np.all(other[:, IDX["phi_a"]] == 0)
+    with pytest.raises(ValueError, match="group must be one of posterior for this result, got 'other_route'"):
+        fit.draws(group="other_route")
     lf = est.label_free
     assert checked.diagnostics["best_fit_median"] == "label-free"
     np.testing.assert_allclose(lf.quantities(checked.best_fit[None])[0], np.median(lf.quantities(other), axis=0))

@@ -211,29 +211,41 @@ class CalibrationResult:
         return self.meta.get("comparison")
 
     # ---- draws ---------------------------------------------------------------------
-    def _var(self, name: str) -> np.ndarray:
-        v = self.idata.posterior[name].values
+    def _var(self, name: str, group: str = "posterior") -> np.ndarray:
+        v = self.idata[group][name].values
         return v.reshape((-1,) + v.shape[2:])
 
     @property
     def n_draws(self) -> int:
         return int(self.idata.posterior.sizes["draw"])
 
-    def draws(self, measurement: int | None = None) -> np.ndarray:
-        """Posterior draws as flat parameter vectors (n_draws, 13E).
+    @property
+    def groups(self) -> tuple[str, ...]:
+        """The groups of draws this result holds: ``posterior``, and ``other_route`` where
+        an amortized calibration kept the route it did not choose beside it (``check=True``
+        of :func:`mdaug.inference.amortized.calibrate.calibrate_amortized`)."""
+        return tuple(g for g in ("posterior", "other_route") if g in self.idata.groups())
+
+    def draws(self, measurement: int | None = None, group: str = "posterior") -> np.ndarray:
+        """Draws as flat parameter vectors (n, 13E): the posterior's, or those of another
+        group in :attr:`groups` (``"other_route"``, marginal: its phases are 0).
 
         Phases are per measurement; ``measurement`` picks one, None (default) takes
         draw i's phases from measurement i mod M (all measurements used evenly). A
         marginal posterior holds no phases (they were marginalised): they are 0, and
         the acquisition that renders the vectors draws its own.
         """
-        n, e, m = self.n_draws, self.n_engines, self.n_measurements
+        if group not in self.groups:
+            raise ValueError(f"group must be one of {', '.join(self.groups)} for this result, got {group!r}")
+        g = self.idata[group]
+        n, e, m = int(g.sizes["chain"] * g.sizes["draw"]), self.n_engines, self.n_measurements
+        marginal = self.marginal or group != "posterior"
         x = np.empty((n, e, N_PARAMS))
         for name in PARAM_NAMES:
-            if name in PHASE_NAMES and self.marginal:
+            if name in PHASE_NAMES and marginal:
                 x[:, :, IDX[name]] = 0.0
                 continue
-            v = self._var(name)
+            v = self._var(name, group)
             if name in PHASE_NAMES:
                 pick = np.arange(n) % m if measurement is None else np.full(n, int(measurement))
                 v = v[np.arange(n), pick]

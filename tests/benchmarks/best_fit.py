@@ -108,21 +108,9 @@ def main(argv=None) -> int:
 
 
 def _smc_draws(res):
-    """The smc route's draws as class vectors (n, 13E), from the posterior or, beside the
-    amortized route, from the ``other_route`` group (phases 0: marginalised)."""
-    import numpy as np
-
-    from mdaug.generator import IDX
-    from mdaug.inference.space.priors import SHARED
-
-    if res.diagnostics["route"] == "smc":
-        return res.draws()
-    g = res.idata.other_route
-    n, e = g["Gamma"].values.reshape(-1, res.n_engines).shape
-    x = np.zeros((n, e, 13))
-    for name in ("Gamma",) + SHARED:
-        x[:, :, IDX[name]] = g[name].values.reshape(n, e)
-    return x.reshape(n, e * 13)
+    """The smc route's draws as class vectors (n, 13E): the posterior's, or beside the
+    amortized route the ``other_route`` group's."""
+    return res.draws() if res.diagnostics["route"] == "smc" else res.draws(group="other_route")
 
 
 def _matched_lines(lf, x, truth):
