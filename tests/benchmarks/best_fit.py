@@ -17,7 +17,9 @@ each engine of a centre matched to the true engine whose sorted lines are neares
 brightness order swaps engines of about equal Gamma): the shipped best fit (the
 label-free median, :func:`mdaug.inference.amortized.calibrate.label_free_median`), the
 component-wise median of the class vectors (the best fit of earlier releases) and the
-amortized posterior's label-free median;
+amortized posterior's label-free median; for the smc draws and the posterior's, the
+quantities whose truth most often falls outside their central 90% interval (with the
+truth's quantile in the prior: a quantity the data do not carry follows the prior);
 and, where the file has a summary likelihood, how far each centre's expected summary lies
 from the truth's in the noise of 5 measurements (sqrt of (mu_c - mu_t)' Sigma_t^-1
 (mu_c - mu_t), the summary model's mean and covariance at the truth): a label-free
@@ -66,7 +68,7 @@ def main(argv=None) -> int:
     truths = lf.quantities(vectors)[:, :4]
     settings = CalibrationSettings(progress=False, time_budget=600)
     errors, seconds, source = {"best fit": [], "posterior median": []}, [], set()
-    kept, dist = {}, {}
+    kept, dist, outside = {}, {}, {}
     if a.compare_medians:
         errors["component-wise"] = []
     print(f"{a.cls} K = {a.ramps}, {a.drones} specimen drones (seed {a.seed}): |x - truth| / truth, "
@@ -83,6 +85,8 @@ def main(argv=None) -> int:
             errors["posterior median"].append(np.abs(np.median(lf.quantities(res.draws()), axis=0)[:4] / truths[i] - 1))
         else:
             smc = _smc_draws(res)
+            for k, v in (("smc", smc), ("posterior", res.draws())):
+                outside.setdefault(k, []).append(_outside(lf, v, vectors[i]))
             centres = {"best fit": res.best_fit, "posterior median": label_free_median(lf, res.draws())[0],
                        "component-wise": np.median(smc, axis=0)}
             for k, v in centres.items():
@@ -100,6 +104,17 @@ def main(argv=None) -> int:
               + (f"  all lines: median {np.median(e):.3f}, mean {e.mean():.3f}" if a.compare_medians else ""))
     for k, v in dist.items():
         print(f"{k:17s} summary distance to the truth: median {np.median(v):.2f}, per drone {np.round(v, 2).tolist()}")
+    if outside:
+        space = est.spec.space()
+        prior_q = lf.quantities(space.vectors(space.sample_prior(20000, np.random.default_rng(a.seed))))
+        tq = lf.quantities(vectors)
+        for k, v in outside.items():
+            share = np.mean(v, axis=0)
+            worst = np.argsort(-share, kind="stable")[:5]
+            print(f"{k:17s} truth outside its 90% interval on {np.mean(v):.3f} of (drone, quantity); most often: "
+                  + ", ".join(f"{lf.names[j]} {share[j]:.2f} (the truth at the prior's "
+                              f"{np.median(np.mean(prior_q[:, j][:, None] < tq[:, j], axis=0)):.2f} quantile)"
+                              for j in worst))
     if a.save and kept:
         np.savez(a.save, truths=vectors, **{k.replace(" ", "_").replace("-", "_"): np.array(v) for k, v in kept.items()})
     if seconds:
@@ -111,6 +126,16 @@ def _smc_draws(res):
     """The smc route's draws as class vectors (n, 13E): the posterior's, or beside the
     amortized route the ``other_route`` group's."""
     return res.draws() if res.diagnostics["route"] == "smc" else res.draws(group="other_route")
+
+
+def _outside(lf, draws, truth):
+    """(d,) whether each label-free quantity of the truth falls outside the draws' central
+    90% interval."""
+    import numpy as np
+
+    q, t = lf.quantities(draws), lf.quantities(np.reshape(truth, (1, -1)))[0]
+    lo, hi = np.percentile(q, [5, 95], axis=0)
+    return (t < lo) | (t > hi)
 
 
 def _matched_lines(lf, x, truth):
