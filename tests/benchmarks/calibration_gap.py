@@ -1,6 +1,7 @@
 """How sharp must a calibration be for its synthetic training set to classify new drones?
 
-python tests/benchmarks/calibration_gap.py STUDY_DIR [--n 1000] [--shrink 1,0.5,0.3] [--models xgb,svm]
+python tests/benchmarks/calibration_gap.py STUDY_DIR [--n 1000] [--shrink 1,0.5,0.3] [--models xgb,svm] \
+    [--smc QUAD=FILE]
 
 STUDY_DIR: a finished simulated study (``mdaug run --out STUDY_DIR``). Its drones are
 drawn around the packaged class references, so the reference is what a perfect
@@ -15,6 +16,9 @@ are trained on it and scored (balanced accuracy, per-class recall) on the study'
   sigma_P = 0: the smc median of the summary likelihood where the estimator has one);
 * ``posterior``: the study's posterior draws (the ``posterior`` strategy's source, without
   its smoothing jitter);
+* ``the smc route's draws`` (with --smc): the summary likelihood's posterior, where a class's
+  posterior is the amortized one the draws kept beside it (``mdaug calibrate --check-route``
+  of the same measurements): what the study would train on if that route were its posterior;
 * ``posterior at the reference, x s``: the posterior's spread in the label-free
   coordinates u, scaled by s and moved onto the reference (an honest posterior of the
   same width, s = 1, or s times as sharp, centred on the truth).
@@ -34,6 +38,7 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402
 
 CLASSES = ("HELI", "QUAD")
+SMC_ROW = "the smc route's draws"
 
 
 def label_free(ref):
@@ -44,12 +49,15 @@ def label_free(ref):
     return LabelFree(ref.n_engines, Priors.from_reference(ref, RadarConfig()), ref.to_array())
 
 
-def vector_sources(study: str, shrinks) -> dict:
-    """{row name: {class: vectors (n, 13E)}}."""
+def vector_sources(study: str, shrinks, smc_files: dict | None = None) -> dict:
+    """{row name: {class: vectors (n, 13E)}}; with smc_files ({class: posterior file kept
+    with ``--check-route``}) the row of every class's smc draws."""
     from mdaug.generator import load_reference
     from mdaug.inference.result.augment import load_posterior
 
     rows = {"reference": {}, "best fit": {}, "posterior": {}}
+    if smc_files:
+        rows[SMC_ROW] = {}
     rows.update({f"posterior at the reference, x {s:g}": {} for s in shrinks})
     for cls in CLASSES:
         ref = load_reference(cls)
@@ -59,6 +67,8 @@ def vector_sources(study: str, shrinks) -> dict:
         rows["reference"][cls] = ref.to_array()[None]
         rows["best fit"][cls] = post.best_fit[None]
         rows["posterior"][cls] = x
+        if smc_files:
+            rows[SMC_ROW][cls] = smc_draws(post, smc_files.get(cls), cls)
         u = lf.to_unbounded(lf.quantities(x))
         u = u[np.all(np.isfinite(u), axis=1)]
         u_ref = lf.to_unbounded(lf.quantities(ref.to_array()[None]))[0]
@@ -68,6 +78,23 @@ def vector_sources(study: str, shrinks) -> dict:
     return rows
 
 
+def smc_draws(post, path: str | None, cls: str) -> np.ndarray:
+    """The smc route's draws of a class: the study's posterior where its route is smc, else
+    the ``other_route`` group of ``path`` (a calibration of the same measurements with
+    ``--check-route``)."""
+    from mdaug.inference.result.augment import load_posterior
+
+    if post.diagnostics.get("route") == "smc":
+        return post.draws()
+    if path is None:
+        raise SystemExit(f"--smc: {cls}'s posterior is the {post.diagnostics.get('route')} route's; give "
+                         f"{cls}=FILE, a calibration of its measurements with --check-route")
+    other = load_posterior(path, cls)
+    if "other_route" not in other.groups:
+        raise SystemExit(f"{path}: no group 'other_route' (calibrate with --check-route)")
+    return other.draws(group="other_route")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("study")
@@ -75,6 +102,9 @@ def main(argv=None) -> int:
     p.add_argument("--shrink", default="1,0.5,0.3")
     p.add_argument("--models", default="xgb,svm")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--smc", nargs="?", const="", default=None, metavar="CLASS=FILE,...",
+                   help="add the row of the smc route's draws (the posterior's where its route is smc, else "
+                        "those kept beside it in FILE by `mdaug calibrate --check-route`)")
     a = p.parse_args(argv)
 
     from sklearn.metrics import balanced_accuracy_score, recall_score
@@ -100,7 +130,8 @@ def main(argv=None) -> int:
           "[recall HELI, QUAD]")
     print(f"{'source of class vectors':36s} {'model':5s} {'select':>20s} {'new_large':>20s}")
     shuffle = np.random.default_rng(a.seed)
-    for row, per_class in vector_sources(a.study, shrinks).items():  # each pool in random order, cycled
+    smc_files = None if a.smc is None else dict(kv.split("=", 1) for kv in a.smc.split(",") if kv)
+    for row, per_class in vector_sources(a.study, shrinks, smc_files).items():  # each pool in random order, cycled
         augs = [ModelAugmenter(FixedSource(shuffle.permutation(per_class[c]), c),
                                Renderer(acq[c], "peak", through_chain=True)) for c in CLASSES]
         ds = make_dataset(augs, a.n, a.seed, progress=False)
