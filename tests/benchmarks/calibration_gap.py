@@ -56,7 +56,7 @@ def vector_sources(study: str, shrinks, smc_files: dict | None = None) -> dict:
     from mdaug.inference.result.augment import load_posterior
 
     rows = {"reference": {}, "best fit": {}, "posterior": {}}
-    if smc_files:
+    if smc_files is not None:
         rows[SMC_ROW] = {}
     rows.update({f"posterior at the reference, x {s:g}": {} for s in shrinks})
     for cls in CLASSES:
@@ -67,7 +67,7 @@ def vector_sources(study: str, shrinks, smc_files: dict | None = None) -> dict:
         rows["reference"][cls] = ref.to_array()[None]
         rows["best fit"][cls] = post.best_fit[None]
         rows["posterior"][cls] = x
-        if smc_files:
+        if smc_files is not None:
             rows[SMC_ROW][cls] = smc_draws(post, smc_files.get(cls), cls)
         u = lf.to_unbounded(lf.quantities(x))
         u = u[np.all(np.isfinite(u), axis=1)]
@@ -93,6 +93,17 @@ def smc_draws(post, path: str | None, cls: str) -> np.ndarray:
     if "other_route" not in other.groups:
         raise SystemExit(f"{path}: no group 'other_route' (calibrate with --check-route)")
     return other.draws(group="other_route")
+
+
+def smc_file_map(text: str) -> dict:
+    """{class: file} from 'CLASS=FILE,...' (--smc), each class one of CLASSES."""
+    out = {}
+    for kv in filter(None, text.split(",")):
+        cls, sep, path = kv.partition("=")
+        if not sep or cls not in CLASSES or not path:
+            raise SystemExit(f"--smc: expected CLASS=FILE with CLASS one of {', '.join(CLASSES)}, got {kv!r}")
+        out[cls] = path
+    return out
 
 
 def main(argv=None) -> int:
@@ -130,7 +141,7 @@ def main(argv=None) -> int:
           "[recall HELI, QUAD]")
     print(f"{'source of class vectors':36s} {'model':5s} {'select':>20s} {'new_large':>20s}")
     shuffle = np.random.default_rng(a.seed)
-    smc_files = None if a.smc is None else dict(kv.split("=", 1) for kv in a.smc.split(",") if kv)
+    smc_files = None if a.smc is None else smc_file_map(a.smc)
     for row, per_class in vector_sources(a.study, shrinks, smc_files).items():  # each pool in random order, cycled
         augs = [ModelAugmenter(FixedSource(shuffle.permutation(per_class[c]), c),
                                Renderer(acq[c], "peak", through_chain=True)) for c in CLASSES]
