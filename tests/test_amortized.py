@@ -631,6 +631,10 @@ def test_the_best_fit_beside_the_amortized_route_is_the_summary_likelihoods_smc_
     assert other.shape == (checked.idata.other_route["Gamma"].size, 13) and np.all(other[:, IDX["phi_a"]] == 0)
     with pytest.raises(ValueError, match="group must be one of posterior for this result, got 'other_route'"):
         fit.draws(group="other_route")
+    np.testing.assert_array_equal(checked.route_draws("smc"), other)  # the route the posterior is not
+    np.testing.assert_array_equal(checked.route_draws("amortized"), checked.draws())
+    with pytest.raises(ValueError, match="route 'smc': this result holds the amortized route's draws only"):
+        fit.route_draws("smc")
     lf = est.label_free
     assert checked.diagnostics["best_fit_median"] == "label-free"
     np.testing.assert_allclose(lf.quantities(checked.best_fit[None])[0], np.median(lf.quantities(other), axis=0))

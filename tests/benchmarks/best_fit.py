@@ -68,7 +68,7 @@ def main(argv=None) -> int:
     truths = lf.quantities(vectors)[:, :4]
     settings = CalibrationSettings(progress=False, time_budget=600)
     errors, seconds, source = {"best fit": [], "posterior median": []}, [], set()
-    kept, dist, outside = {}, {}, {}
+    kept, dist, drawn = {}, {}, {}
     if a.compare_medians:
         errors["component-wise"] = []
     print(f"{a.cls} K = {a.ramps}, {a.drones} specimen drones (seed {a.seed}): |x - truth| / truth, "
@@ -84,9 +84,9 @@ def main(argv=None) -> int:
             errors["best fit"].append(np.abs(lf.quantities(res.best_fit[None])[0, :4] / truths[i] - 1))
             errors["posterior median"].append(np.abs(np.median(lf.quantities(res.draws()), axis=0)[:4] / truths[i] - 1))
         else:
-            smc = _smc_draws(res)
+            smc = res.route_draws("smc")
             for k, v in (("smc", smc), ("posterior", res.draws())):
-                outside.setdefault(k, []).append(_outside(lf, v, vectors[i]))
+                drawn.setdefault(k, []).append(lf.quantities(v))
             centres = {"best fit": res.best_fit, "posterior median": label_free_median(lf, res.draws())[0],
                        "component-wise": np.median(smc, axis=0)}
             for k, v in centres.items():
@@ -104,14 +104,19 @@ def main(argv=None) -> int:
               + (f"  all lines: median {np.median(e):.3f}, mean {e.mean():.3f}" if a.compare_medians else ""))
     for k, v in dist.items():
         print(f"{k:17s} summary distance to the truth: median {np.median(v):.2f}, per drone {np.round(v, 2).tolist()}")
-    if outside:
+    if drawn:
+        from mdaug.inference.diagnostics.routes import coverage
+
         space = est.spec.space()
         prior_q = lf.quantities(space.vectors(space.sample_prior(20000, np.random.default_rng(a.seed))))
         tq = lf.quantities(vectors)
-        for k, v in outside.items():
-            share = np.mean(v, axis=0)
+        for k, qs in drawn.items():
+            n = min(len(q) for q in qs)
+            cov = coverage(np.stack([q[:n] for q in qs], axis=1), tq, lf.names)
+            share = 1 - np.array([cov["coverage_by_quantity"][name]["0.90"] for name in lf.names])
             worst = np.argsort(-share, kind="stable")[:5]
-            print(f"{k:17s} truth outside its 90% interval on {np.mean(v):.3f} of (drone, quantity); most often: "
+            print(f"{k:17s} truth outside its 90% interval on {1 - cov['coverage']['0.90']:.3f} of (drone, quantity); "
+                  "most often: "
                   + ", ".join(f"{lf.names[j]} {share[j]:.2f} (the truth at the prior's "
                               f"{np.median(np.mean(prior_q[:, j][:, None] < tq[:, j], axis=0)):.2f} quantile)"
                               for j in worst))
@@ -120,22 +125,6 @@ def main(argv=None) -> int:
     if seconds:
         print(f"smc run: median {np.median(seconds):.1f} s per drone (range {min(seconds):.1f}-{max(seconds):.1f})")
     return 0
-
-
-def _smc_draws(res):
-    """The smc route's draws as class vectors (n, 13E): the posterior's, or beside the
-    amortized route the ``other_route`` group's."""
-    return res.draws() if res.diagnostics["route"] == "smc" else res.draws(group="other_route")
-
-
-def _outside(lf, draws, truth):
-    """(d,) whether each label-free quantity of the truth falls outside the draws' central
-    90% interval."""
-    import numpy as np
-
-    q, t = lf.quantities(draws), lf.quantities(np.reshape(truth, (1, -1)))[0]
-    lo, hi = np.percentile(q, [5, 95], axis=0)
-    return (t < lo) | (t > hi)
 
 
 def _matched_lines(lf, x, truth):

@@ -85,14 +85,14 @@ def smc_draws(post, path: str | None, cls: str) -> np.ndarray:
     from mdaug.inference.result.augment import load_posterior
 
     if post.diagnostics.get("route") == "smc":
-        return post.draws()
+        return post.route_draws("smc")
     if path is None:
         raise SystemExit(f"--smc: {cls}'s posterior is the {post.diagnostics.get('route')} route's; give "
                          f"{cls}=FILE, a calibration of its measurements with --check-route")
-    other = load_posterior(path, cls)
-    if "other_route" not in other.groups:
-        raise SystemExit(f"{path}: no group 'other_route' (calibrate with --check-route)")
-    return other.draws(group="other_route")
+    try:
+        return load_posterior(path, cls).route_draws("smc")
+    except ValueError as e:
+        raise SystemExit(f"{path}: {e} (calibrate with --check-route)") from None
 
 
 def smc_file_map(text: str) -> dict:
