@@ -505,6 +505,20 @@ def test_the_summary_likelihood_round_trips_through_the_estimator_file(tiny):
     assert meta["error_net"] == {"dim": est.label_free.dim, "hidden": 32}
 
 
+def test_summary_model_returns_the_files_likelihood_or_refuses_naming_the_source(tiny):
+    import copy
+
+    est, path = tiny
+    assert est.summary_model(str(path)) is est.summary
+    bare = copy.copy(est)
+    bare.summary = None
+    with pytest.raises(EstimatorError) as info:
+        bare.summary_model("heli-k4.zip")
+    msg = str(info.value)
+    assert msg.startswith("heli-k4.zip: carries no summary likelihood (class HELI, K = 4)")
+    assert "mdaug train-estimator --class HELI --ramps 4" in msg
+
+
 def _rewrite(path, tmp_path, name, change):
     with zipfile.ZipFile(path) as z:
         members = {n: z.read(n) for n in z.namelist()}

@@ -108,6 +108,14 @@ class AmortizedEstimator:
             self.meta["default_route"] = default_route
         return self
 
+    def summary_model(self, source: str = "the estimator"):
+        """The file's summary likelihood (:class:`mdaug.inference.emulator.model.SummaryModel`);
+        EstimatorError naming ``source`` and the command that trains one when it has none."""
+        if self.summary is None:
+            raise EstimatorError(f"{source}: carries no summary likelihood (class {self.class_name}, K = "
+                                 f"{self.spec.acquisition.ramps}); `{train_command(self.spec)}` trains one with it")
+        return self.summary
+
     @property
     def max_measurements(self) -> int:
         return int(self.spec.n_measurements)

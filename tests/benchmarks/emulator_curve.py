@@ -65,7 +65,7 @@ def main(argv=None) -> int:
     import torch
 
     from mdaug.generator.acquisition import Acquisition
-    from mdaug.inference.amortized.estimator import AmortizedEstimator
+    from mdaug.inference.amortized.estimator import EstimatorError
     from mdaug.inference.amortized.shipped import find
     from mdaug.inference.amortized.simulate import load_shards
     from mdaug.inference.emulator.net import Emulator, fit
@@ -87,10 +87,11 @@ def main(argv=None) -> int:
     if not sizes or sizes[0] < 100:
         raise SystemExit(f"--sizes must be at least 100 each, got {a.sizes!r}")
     torch.set_num_threads(1)
-    est = AmortizedEstimator.load(a.estimator) if a.estimator else find(a.cls, Acquisition.measured(a.ramps))
-    lf, model = est.label_free, est.summary
-    if model is None:
-        raise SystemExit(f"{a.cls} K = {a.ramps}: the estimator has no summary likelihood (its whitening sets the units)")
+    try:  # the file's whitening sets the units
+        est = find(a.cls, Acquisition.measured(a.ramps), path=a.estimator)
+        lf, model = est.label_free, est.summary_model(a.estimator or f"the shipped {a.cls} K = {a.ramps} file")
+    except EstimatorError as exc:
+        raise SystemExit(str(exc)) from None
     parts, test = [], None
     for i, folder in enumerate(a.sims):
         paths = sorted(glob.glob(os.path.join(folder, "shard-*.npz")))

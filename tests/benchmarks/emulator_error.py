@@ -75,7 +75,7 @@ def main(argv=None) -> int:
 
     from mdaug.generator.acquisition import Acquisition
     from mdaug.generator.augment import Renderer
-    from mdaug.inference.amortized.estimator import AmortizedEstimator
+    from mdaug.inference.amortized.estimator import EstimatorError
     from mdaug.inference.amortized.shipped import find
     from mdaug.inference.emulator.summary import folded_log_profile
     from mdaug.inference.likelihood.base import prepare_measured
@@ -91,10 +91,11 @@ def main(argv=None) -> int:
     if a.measurements < 4 * N_CAL:
         raise SystemExit(f"--measurements must be at least {4 * N_CAL}, got {a.measurements}")
     torch.set_num_threads(1)
-    est = AmortizedEstimator.load(a.estimator) if a.estimator else find(a.cls, Acquisition.measured(a.ramps))
-    lf, model = est.label_free, est.summary
-    if model is None:
-        raise SystemExit(f"{a.cls} K = {a.ramps}: the estimator has no summary likelihood")
+    try:
+        est = find(a.cls, Acquisition.measured(a.ramps), path=a.estimator)
+        lf, model = est.label_free, est.summary_model(a.estimator or f"the shipped {a.cls} K = {a.ramps} file")
+    except EstimatorError as exc:
+        raise SystemExit(str(exc)) from None
     renderer = Renderer(est.spec.acquisition, normalisation="none", radar=est.spec.radar, through_chain=True)
     rng = np.random.default_rng(a.seed)
     print(f"{a.cls} K = {a.ramps}, {a.drones} drones per group, {a.measurements} measurements each; "

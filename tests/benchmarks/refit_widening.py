@@ -67,7 +67,7 @@ def main(argv=None) -> int:
     from scipy.stats import chi2
 
     from mdaug.inference.amortized.shipped import shipped_path
-    from mdaug.inference.amortized.estimator import AmortizedEstimator
+    from mdaug.inference.amortized.estimator import AmortizedEstimator, EstimatorError
     from mdaug.inference.emulator.train import fit_widening
     from mdaug.inference.estimator_job import sbc_data
 
@@ -86,9 +86,10 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     path = a.from_file or shipped_path(a.cls, a.ramps)
     est = AmortizedEstimator.load(path)
-    if est.summary is None:
-        ap.error(f"{path} carries no summary likelihood")
-    lf, model = est.label_free, est.summary
+    try:
+        lf, model = est.label_free, est.summary_model(str(path))
+    except EstimatorError as exc:
+        ap.error(str(exc))
     groups = {}
     for name, n, width, seed in (("prior", a.prior, 0.0, a.seed), ("near x4", a.near, 4.0, a.seed - 1),
                                  ("specimens", a.specimens, 1.0, a.seed - 2)):

@@ -55,6 +55,7 @@ def main(argv=None) -> int:
     import torch
 
     from mdaug.generator.acquisition import Acquisition
+    from mdaug.inference.amortized.estimator import EstimatorError
     from mdaug.inference.amortized.shipped import find
     from mdaug.inference.amortized.simulate import load_shards
     from mdaug.inference.emulator.model import from_parts, to_parts
@@ -83,9 +84,11 @@ def main(argv=None) -> int:
     est = find(a.cls, Acquisition.measured(a.ramps), path=a.from_file)
     lf = est.label_free
     if a.from_file:
-        if est.summary is None:
-            ap.error(f"--from-file {a.from_file}: the file carries no summary likelihood")
-        model, report = est.summary, est.meta["summary"]["training"]
+        try:
+            model = est.summary_model(f"--from-file {a.from_file}")
+        except EstimatorError as exc:
+            ap.error(str(exc))
+        report = est.meta["summary"]["training"]
     elif not (a.prior and a.near):
         ap.error("--prior and --near are needed unless --from-file is given")
     elif a.model:
