@@ -88,6 +88,17 @@ class Emulator(nn.Module):
         return (sk - self.sketch_centre) @ self.sketch_basis.T + corr / self.members
 
     @classmethod
+    def member(cls, dim: int, basis: np.ndarray, centre: np.ndarray, hidden: int = 256, depth: int = 3) -> "Emulator":
+        """A one-member emulator of ``dim`` coordinates whose sketch projection is the
+        whitening's: basis (D, F), centre (F,) (sizes read from them), ready for :func:`fit`."""
+        basis, centre = np.asarray(basis), np.asarray(centre)
+        net = cls(dim, basis.shape[1], basis.shape[0], hidden, depth)
+        with torch.no_grad():
+            net.sketch_basis.copy_(torch.as_tensor(basis, dtype=torch.float32))
+            net.sketch_centre.copy_(torch.as_tensor(centre, dtype=torch.float32))
+        return net
+
+    @classmethod
     def stack(cls, nets: list["Emulator"]) -> "Emulator":
         """One emulator whose correction is the mean of the given one-member emulators'
         (same sizes and sketch projection)."""

@@ -30,7 +30,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 from ...generator.acquisition import Acquisition
 from ...radar import RadarConfig
@@ -88,9 +87,7 @@ def train_summary_model(x: np.ndarray, profiles: np.ndarray, label_free, class_n
     z = z_all.mean(1)
     nets, hists = [], []
     for k in range(config.members):  # a bagged ensemble: each member its own seed (split, batches, start)
-        net = Emulator(label_free.dim, config.n_offsets, config.n_components, config.hidden, config.depth)
-        net.sketch_basis.copy_(torch.as_tensor(wh.basis, dtype=torch.float32))
-        net.sketch_centre.copy_(torch.as_tensor(wh.centre, dtype=torch.float32))
+        net = Emulator.member(label_free.dim, wh.basis, wh.centre, config.hidden, config.depth)
         hists.append(fit(net, u[train], sk[train], z[train], seed=seed + k, epochs=config.epochs))
         nets.append(net)
     net = Emulator.stack(nets)

@@ -123,9 +123,7 @@ def main(argv=None) -> int:
     for n in sizes:
         idx = perm[:n]
         torch.manual_seed(a.seed)  # the network's starting weights: the same for every size and run
-        net = Emulator(lf.dim, model.whitening.n_offsets, model.n_components, cfg["hidden"], cfg["depth"])
-        net.sketch_basis.copy_(torch.as_tensor(model.whitening.basis, dtype=torch.float32))
-        net.sketch_centre.copy_(torch.as_tensor(model.whitening.centre, dtype=torch.float32))
+        net = Emulator.member(lf.dim, model.whitening.basis, model.whitening.centre, cfg["hidden"], cfg["depth"])
         t = time.time()
         hist = fit(net, pool[0][idx], pool[1][idx], pool[2][idx], seed=a.seed)
         te = error_in_noise_units(net, *test)
