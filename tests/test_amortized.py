@@ -22,7 +22,7 @@ from mdaug.inference.space.priors import Priors, engine_lines  # noqa: E402
 TINY = NetConfig(channels=(2, 4, 4, 4), trial_out=8, set_hidden=16, set_out=8, flow_hidden=16, flow_transforms=2,
                  ratio_hidden=16)
 TINY_SUMMARY = EmulatorConfig(n_offsets=64, n_components=4, hidden=16, depth=1, members=2, cov_hidden=16, epochs=3, cov_epochs=3,
-                              n_calibration=3)
+                              n_calibration=3, n_starts=1)
 
 
 @pytest.fixture(scope="module")
@@ -404,7 +404,7 @@ def test_train_estimator_and_sbc_verbs(tmp_path, capsys, refused):
 
     out = tmp_path / "h.zip"
     argv = ["train-estimator", "--class", "HELI", "--ramps", "4", "--simulations", "100", "--measurements", "3",
-            "--epochs", "1", "--sbc-truths", "0", "--near-simulations", "30", "--summary-epochs", "2", "--out", str(out)]
+            "--epochs", "1", "--sbc-truths", "0", "--near-simulations", "20", "--summary-epochs", "2", "--out", str(out)]
     assert main(argv) == 0, capsys.readouterr().err
     meta = AmortizedEstimator.load(out).meta
     assert meta["n_simulations"] == 100
