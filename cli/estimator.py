@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .common import add_verb, count, info, nonneg_int, positive_float, positive_int, result, seed_int
+from .common import add_verb, count, info, nonneg_float, nonneg_int, positive_float, positive_int, result, seed_int
 
 MAX_SIMULATIONS = 2_000_000
 MAX_MEASUREMENTS = 32
@@ -92,7 +92,9 @@ def _command(args, cls: str, epochs: int) -> str:
     budgets = "".join(f" --{name}-budget {v:g}" for name, v in (("posterior", args.posterior_budget),
                                                                  ("ratio", args.ratio_budget)) if v is not None)
     return (f"mdaug train-estimator --class {cls} --ramps {args.ramps} --simulations {args.simulations} "
-            f"--measurements {args.measurements} --seed {args.seed} --epochs {epochs}{budgets} --out {args.out.name}")
+            f"--measurements {args.measurements} --seed {args.seed} --epochs {epochs}{budgets}"
+            + (f" --start-from {args.start_from.name}" if args.start_from is not None else "")
+            + f" --out {args.out.name}")
 
 
 def run_train(args) -> int:
@@ -107,9 +109,15 @@ def run_train(args) -> int:
     cls = _class(args.class_name)
     device_of(args.device)  # refuses cuda without a GPU, before any work
     check_estimator_sizes(args)
-    check_paths(outputs=[Output("--out", args.out, "model"), Output("--work", _work(args), "folder")],
+    for name, budget in (("--posterior-budget", args.posterior_budget), ("--ratio-budget", args.ratio_budget)):
+        if budget == 0 and args.start_from is None:
+            raise ValueError(f"{name} 0 trains nothing; it keeps the network of a --start-from file, and none "
+                             "was given")
+    check_paths(inputs=[("--start-from", args.start_from)],
+                outputs=[Output("--out", args.out, "model"), Output("--work", _work(args), "folder")],
                 overwrite=args.overwrite)
     spec = SimulationSpec(cls, Acquisition.measured(args.ramps), args.measurements)
+    start = _start(args, spec, cls)
     cfg = default_training()
     if args.epochs is not None:
         from dataclasses import replace
@@ -126,7 +134,7 @@ def run_train(args) -> int:
                               sbc_truths=args.sbc_truths, sbc_route_truths=args.sbc_route_truths,
                               sbc_specimens=args.sbc_specimens,
                               summary=not args.no_summary, near_simulations=args.near_simulations,
-                              summary_cfg=_summary_config(args),
+                              summary_cfg=_summary_config(args), start=start,
                               command=_command(args, cls, cfg.max_epochs),
                               progress=progress_enabled(), log=info)
     except Exception:  # failed (an interrupt keeps the work folder, to resume): leave nothing this run made
@@ -139,6 +147,26 @@ def run_train(args) -> int:
         raise
     result(f"wrote {args.out} ({est.meta['job_seconds']:.0f} s)")
     return 0
+
+
+def _start(args, spec, cls: str):
+    """The --start-from estimator, checked against this training's class, K, measurements
+    and networks before any work (EstimatorError naming the file and the field)."""
+    if args.start_from is None:
+        return None
+    from ..inference.amortized.estimator import AmortizedEstimator, EstimatorError
+    from ..inference.amortized.shipped import default_nets
+    from ..inference.estimator_job import started_from
+
+    try:
+        est = AmortizedEstimator.load(args.start_from)
+    except EstimatorError as exc:
+        raise EstimatorError(f"--start-from: {exc}") from None
+    try:
+        started_from(est, spec, default_nets(cls), "cpu")
+    except ValueError as exc:
+        raise EstimatorError(f"--start-from {args.start_from}: {exc}") from None
+    return est
 
 
 def _summary_config(args):
@@ -241,10 +269,16 @@ def add_train(sub, parents, help):
                    help="where to train (auto: a GPU when present) (default: %(default)s)")
     p.add_argument("--seed", type=seed_int, default=0, help="seed of simulations and training (default: %(default)s)")
     p.add_argument("--epochs", type=positive_int, default=None, metavar="N", help="most epochs per network (default: 300, early stopping first)")
-    p.add_argument("--posterior-budget", type=positive_float, default=None, metavar="SECONDS",
-                   help="training seconds of the posterior network (default: none)")
-    p.add_argument("--ratio-budget", type=positive_float, default=None, metavar="SECONDS",
-                   help="training seconds of the likelihood network (default: none)")
+    p.add_argument("--posterior-budget", type=nonneg_float, default=None, metavar="SECONDS",
+                   help="training seconds of the posterior network (default: none; 0 with --start-from: keep "
+                        "that file's network)")
+    p.add_argument("--ratio-budget", type=nonneg_float, default=None, metavar="SECONDS",
+                   help="training seconds of the likelihood network (default: none; 0 with --start-from: keep "
+                        "that file's network)")
+    p.add_argument("--start-from", type=Path, default=None, metavar="FILE",
+                   help="estimator ZIP of the same class, K, measurements and networks whose weights the "
+                        "training starts from (more drones refine a file, the shipped one too, instead of "
+                        "training from scratch); its summary likelihood is kept, not retrained (default: none)")
     p.add_argument("--sbc-truths", type=nonneg_int, default=300, metavar="N",
                    help="SBC drones of the amortized route (default: %(default)s; 0: none)")
     p.add_argument("--sbc-route-truths", type=nonneg_int, default=0, metavar="N",

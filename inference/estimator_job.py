@@ -10,6 +10,7 @@ Everything lives in one work folder (``sims/``, ``near/``, ``posterior.ckpt``,
 """
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -59,14 +60,18 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
                     sbc_truths: int = 300, sbc_route_truths: int = 0, route_settings=None, sbc_specimens: int = 50,
                     shard_size: int = 500,
                     summary: bool = True, near_simulations: int | None = None, near_width: float = NEAR_WIDTH,
-                    summary_cfg=None, command: str | None = None, progress=None, log=print) -> AmortizedEstimator:
+                    summary_cfg=None, start: AmortizedEstimator | None = None, command: str | None = None,
+                    progress=None, log=print) -> AmortizedEstimator:
     """The whole job (module doc); writes the estimator to ``out`` and returns it.
     post_budget, ratio_budget: training seconds of each network (default: the
     train_cfg's time budget); sim_budget: simulation seconds (training then uses the
     drones simulated by then); summary: train the summary likelihood too, on the prior's
     drones and ``near_simulations`` (default: half as many) drones of the specimen model
     around the reference at ``near_width`` x its spreads; command: the command line that
-    ran the job (kept in the file, so anyone can train it again)."""
+    ran the job (kept in the file, so anyone can train it again); start: an estimator
+    of the same spec and networks whose weights the training starts from (more drones
+    refine a file instead of training from scratch; a budget of 0 keeps that network as
+    it is); its summary likelihood is kept, not retrained, unless ``summary`` is False."""
     import torch
 
     t0 = time.perf_counter()
@@ -80,8 +85,11 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
     label_free = LabelFree(ref.n_engines, spec.priors(), ref.to_array())
     u = torch.as_tensor(label_free.to_unbounded(label_free.quantities(vectors)), dtype=torch.float32, device=dev)
     x = torch.as_tensor(profiles, device=dev)
-    torch.manual_seed(child_seed(seed, "init"))
-    est = AmortizedEstimator.build(spec, net_cfg, u, x)
+    if start is None:
+        torch.manual_seed(child_seed(seed, "init"))
+        est = AmortizedEstimator.build(spec, net_cfg, u, x)
+    else:
+        est = started_from(start, spec, net_cfg, dev, keep_summary=summary)
     log(f"{spec.class_name} K={spec.acquisition.ramps}: {len(u)} simulated drones x {spec.n_measurements} "
         f"measurements in {t_sim:.0f} s; training on {dev}")
     logs = {}
@@ -94,7 +102,11 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
         log(f"  {name}: {tl.epochs} epochs, best validation loss {tl.best_val:.4f} at epoch {tl.best_epoch} "
             f"({tl.stopped}), {tl.seconds:.0f} s")
     del x
-    if summary:
+    if start is not None:
+        logs["start_from"] = {"n_simulations": start.meta.get("n_simulations"), "seed": start.meta.get("seed"),
+                              "command": start.meta.get("command"),
+                              "summary": "kept" if est.summary is not None else "none"}
+    if summary and est.summary is None:
         n_near = n_simulations // 2 if near_simulations is None else int(near_simulations)
         add_summary(est, vectors, profiles, work, n_near=n_near, near_width=near_width, seed=seed, workers=workers,
                     shard_size=shard_size, config=summary_cfg, progress=progress, log=log)
@@ -111,6 +123,23 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
     est.save(out)
     log(f"estimator written to {out} ({time.perf_counter() - t0:.0f} s in all)")
     return est
+
+
+def started_from(start: AmortizedEstimator, spec: SimulationSpec, net_cfg: NetConfig, device,
+                 keep_summary: bool = True) -> AmortizedEstimator:
+    """A copy of ``start``'s networks (on ``device``) to train further, its summary
+    likelihood kept when ``keep_summary``; ValueError naming the first field in which
+    its simulations or networks differ from ``spec`` and ``net_cfg``."""
+    for what, mine, theirs in (("spec", spec.to_dict(), start.spec.to_dict()),
+                               ("net", net_cfg.to_dict(), start.net_cfg.to_dict())):
+        for key in mine:
+            if mine[key] != theirs.get(key):
+                raise ValueError(f"meta.json field '{what}.{key}' is {theirs.get(key)!r}; this training needs "
+                                 f"{mine[key]!r}")
+    summary = start.summary if keep_summary else None
+    meta = {"summary": start.meta["summary"]} if summary is not None else None
+    return AmortizedEstimator(spec, net_cfg, copy.deepcopy(start.posterior).to(device),
+                              copy.deepcopy(start.ratio).to(device), meta=meta, summary=summary)
 
 
 def sbc_data(spec: SimulationSpec, n: int, seed, workers: int = 1):

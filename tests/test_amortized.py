@@ -431,6 +431,42 @@ def test_train_estimator_and_sbc_verbs(tmp_path, capsys, refused):
                  str(empty / "x.zip")], empty, empty, ["device 'cuda'", "no GPU"])
 
 
+def test_training_starts_from_a_files_weights_and_keeps_its_summary(tiny, tmp_path):
+    """--start-from: a budget of 0 keeps the file's networks bit for bit (and its summary
+    likelihood); one epoch moves them from there, and the start's own weights stay."""
+    from mdaug.inference.amortized.train import TrainConfig
+    from mdaug.inference.estimator_job import started_from, train_estimator
+
+    est, _ = tiny
+    before = {k: v.clone() for k, v in est.posterior.state_dict().items()}
+    kw = dict(seed=9, device="cpu", net_cfg=TINY, train_cfg=TrainConfig(batch=32, max_epochs=1), sbc_truths=0,
+              shard_size=50, start=est, progress=False, log=lambda m: None)
+    kept = train_estimator(est.spec, 100, tmp_path / "w0", tmp_path / "kept.zip", post_budget=0, ratio_budget=0, **kw)
+    for k, v in kept.posterior.state_dict().items():
+        assert torch.equal(v, before[k]), k
+    loaded = AmortizedEstimator.load(tmp_path / "kept.zip")
+    assert loaded.summary is not None and loaded.meta["summary"] == est.meta["summary"]
+    assert loaded.meta["training"]["posterior"]["epochs"] == 0 and loaded.meta["n_simulations"] == 100
+    assert loaded.meta["training"]["start_from"]["summary"] == "kept"
+    moved = train_estimator(est.spec, 100, tmp_path / "w1", tmp_path / "moved.zip", **kw)
+    assert any(not torch.equal(v, before[k]) for k, v in moved.posterior.state_dict().items())
+    for k, v in est.posterior.state_dict().items():
+        assert torch.equal(v, before[k]), k  # the start itself is untouched
+    with pytest.raises(ValueError, match="'spec.n_measurements' is 4; this training needs 6"):
+        started_from(est, SimulationSpec("HELI", Acquisition.measured(4), 6), TINY, "cpu")
+    with pytest.raises(ValueError, match="'net.channels'"):
+        started_from(est, est.spec, NetConfig(), "cpu")
+
+
+def test_start_from_is_checked_before_any_work(tiny, tmp_path, refused):
+    _, path = tiny
+    inputs, out = _folders(tmp_path)
+    base = ["train-estimator", "--class", "HELI", "--ramps", "4", "--measurements", "4", "--out", str(out / "e.zip")]
+    refused(base + ["--start-from", str(path)], inputs, out, [f"--start-from {path}", "'net.channels'"])
+    refused(base + ["--posterior-budget", "0"], inputs, out, ["--posterior-budget 0 trains nothing", "--start-from"])
+    refused(base + ["--start-from", str(out / "none.zip")], inputs, out, ["--start-from", "none.zip"])
+
+
 def test_calibrate_refuses_a_trace_of_the_amortized_route_before_any_work(tiny, tmp_path, refused):
     est, path = tiny
     _, y = simulate(est.spec, 1, 23)
