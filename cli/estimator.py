@@ -216,7 +216,7 @@ def run_sbc(args) -> int:
     settings = CalibrationSettings(progress=False, time_budget=args.time_budget)
     out = estimator_sbc(est, args.truths, seed=args.seed, workers=args.workers, route_truths=args.route_truths,
                         route_settings=settings, progress=progress_enabled(), log=info,
-                        specimens=args.specimens if args.route_truths else 0)
+                        specimens=args.specimens)
     for route, s in out.items():
         if not isinstance(s, dict) or "coverage90_range" not in s:  # the route table's own record
             continue
@@ -314,8 +314,9 @@ def add_sbc(sub, parents, help):
                    help="of those, how many also through the smc route (tempered SMC from the amortized posterior "
                         "to the learned likelihood's posterior), for the route table (default: %(default)s)")
     p.add_argument("--specimens", type=nonneg_int, default=0, metavar="N",
-                   help="with --route-truths: also both routes on N drones like a user's (the specimen model "
-                        "around the class reference), which name the default route (default: %(default)s)")
+                   help="also N drones like a user's (the specimen model around the class reference): both "
+                        "routes with --route-truths, which then name the default route; the amortized route "
+                        "alone without (default: %(default)s)")
     p.add_argument("--time-budget", type=positive_float, default=60.0, metavar="SECONDS",
                    help="smc route seconds per drone (default: %(default)s)")
     p.add_argument("--workers", type=positive_int, default=1, metavar="N",

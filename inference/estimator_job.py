@@ -166,7 +166,8 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
     ``route_truths`` of them (in ``workers`` processes when ``estimator_path``, the
     estimator's file, is given), with the same routes on ``specimens`` drones like a
     user's (:func:`specimen_table`, seeded by ``specimen_seed``, default a child of
-    ``seed``); the table's default route by :func:`name_default_route`."""
+    ``seed``; without a route table, the amortized route alone on them); the table's
+    default route by :func:`name_default_route`."""
     lf = est.label_free
     vectors, profiles = sbc_data(est.spec, n_truths, seed, workers)
     truths = lf.quantities(vectors)
@@ -210,6 +211,10 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
         name_default_route(out)
         log(f"  route table on {k} drones: default route {out['route_table']['default']} "
             f"({out['route_table']['default_by']})")
+    elif specimens:  # no route table: the amortized route alone where users' drones are
+        s_seed = child_seed(seed, "specimens") if specimen_seed is None else specimen_seed
+        out["specimens"] = specimen_table(est, specimens, seed=s_seed, workers=workers, progress=progress,
+                                          routes=("amortized",))
     return out
 
 

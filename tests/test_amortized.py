@@ -458,6 +458,21 @@ def test_training_starts_from_a_files_weights_and_keeps_its_summary(tiny, tmp_pa
         started_from(est, est.spec, NetConfig(), "cpu")
 
 
+def test_sbc_specimens_without_a_route_table_run_the_amortized_route_alone(tiny, tmp_path, capsys):
+    from mdaug.cli import main
+
+    _, path = tiny
+    js = tmp_path / "s.json"
+    assert main(["sbc", "--class", "HELI", "--ramps", "4", "--estimator", str(path), "--truths", "3",
+                 "--specimens", "4", "--json", str(js)]) == 0
+    text = capsys.readouterr().out
+    data = json.loads(js.read_text())
+    assert "route_table" not in data and set(data["specimens"]["rows"]) == {"amortized"}
+    assert data["specimens"]["drones"] == 4 and data["specimens"]["rows"]["amortized"]["n_replicates"] == 4
+    assert set(data["specimens"]["crb_width_over_truth"]) == set(data["amortized"]["width_over_truth"])
+    assert "HELI K=4 amortized on 4 specimen drones: log score" in text and "default route" not in text
+
+
 def test_start_from_is_checked_before_any_work(tiny, tmp_path, refused):
     _, path = tiny
     inputs, out = _folders(tmp_path)
