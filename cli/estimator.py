@@ -156,14 +156,14 @@ def _start(args, spec, cls: str):
         return None
     from ..inference.amortized.estimator import AmortizedEstimator, EstimatorError
     from ..inference.amortized.shipped import default_nets
-    from ..inference.estimator_job import started_from
+    from ..inference.estimator_job import check_start
 
     try:
         est = AmortizedEstimator.load(args.start_from)
     except EstimatorError as exc:
         raise EstimatorError(f"--start-from: {exc}") from None
     try:
-        started_from(est, spec, default_nets(cls), "cpu")
+        check_start(est, spec, default_nets(cls))
     except ValueError as exc:
         raise EstimatorError(f"--start-from {args.start_from}: {exc}") from None
     return est

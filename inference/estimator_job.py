@@ -125,17 +125,22 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
     return est
 
 
-def started_from(start: AmortizedEstimator, spec: SimulationSpec, net_cfg: NetConfig, device,
-                 keep_summary: bool = True) -> AmortizedEstimator:
-    """A copy of ``start``'s networks (on ``device``) to train further, its summary
-    likelihood kept when ``keep_summary``; ValueError naming the first field in which
-    its simulations or networks differ from ``spec`` and ``net_cfg``."""
+def check_start(start: AmortizedEstimator, spec: SimulationSpec, net_cfg: NetConfig) -> None:
+    """ValueError naming the first meta field in which ``start``'s simulations or networks
+    differ from ``spec`` and ``net_cfg`` (a training cannot start from its weights)."""
     for what, mine, theirs in (("spec", spec.to_dict(), start.spec.to_dict()),
                                ("net", net_cfg.to_dict(), start.net_cfg.to_dict())):
         for key in mine:
             if mine[key] != theirs.get(key):
                 raise ValueError(f"meta.json field '{what}.{key}' is {theirs.get(key)!r}; this training needs "
                                  f"{mine[key]!r}")
+
+
+def started_from(start: AmortizedEstimator, spec: SimulationSpec, net_cfg: NetConfig, device,
+                 keep_summary: bool = True) -> AmortizedEstimator:
+    """A copy of ``start``'s networks (on ``device``) to train further, its summary
+    likelihood kept when ``keep_summary`` (:func:`check_start` first)."""
+    check_start(start, spec, net_cfg)
     summary = start.summary if keep_summary else None
     meta = {"summary": start.meta["summary"]} if summary is not None else None
     return AmortizedEstimator(spec, net_cfg, copy.deepcopy(start.posterior).to(device),
