@@ -3,7 +3,8 @@
 ``data/<class>-k<K>.zip`` for the embedded radar, both classes, K = 1 (single
 chirp), 4 (the quick study) and 32 (the default study), trained by
 ``tests/benchmarks/estimators.py`` (the README's calibration page gives the command
-and the figures). :func:`find` returns the one for a class and acquisition, or
+and the figures); QUAD at K = 32 then refined on 106,000 drones from those weights
+(``train-estimator --start-from``; its meta's ``made_by`` says how). :func:`find` returns the one for a class and acquisition, or
 refuses by name with the command that trains it.
 """
 from __future__ import annotations
