@@ -209,17 +209,15 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
                     f"{out[name]['converged_share']:.2f}")
         out["route_table"] = {"drones": int(k), "default": table["default"],
                               "rows": {n: _row(r) for n, r in table["rows"].items()}}
-        if specimens:
-            s_seed = child_seed(seed, "specimens") if specimen_seed is None else specimen_seed
-            out["specimens"] = specimen_table(est, specimens, settings=settings, seed=s_seed, workers=workers,
-                                              estimator_path=estimator_path, progress=progress, routes=tuple(routes))
+    if specimens:  # drones like a user's: the table's routes, or the amortized route alone without a table
+        s_seed = child_seed(seed, "specimens") if specimen_seed is None else specimen_seed
+        out["specimens"] = specimen_table(est, specimens, settings=route_settings, seed=s_seed, workers=workers,
+                                          estimator_path=estimator_path, progress=progress,
+                                          routes=tuple(routes) if route_truths else ("amortized",))
+    if route_truths:
         name_default_route(out)
         log(f"  route table on {k} drones: default route {out['route_table']['default']} "
             f"({out['route_table']['default_by']})")
-    elif specimens:  # no route table: the amortized route alone where users' drones are
-        s_seed = child_seed(seed, "specimens") if specimen_seed is None else specimen_seed
-        out["specimens"] = specimen_table(est, specimens, seed=s_seed, workers=workers, progress=progress,
-                                          routes=("amortized",))
     return out
 
 
