@@ -47,9 +47,13 @@ def check_estimator_sizes(args) -> None:
         check_size(sims, meas, k, seconds_each=SECONDS_SIMULATED_RAMP, what="simulated ramps")
         check_size(sims, meas, ("--epochs", args.epochs or 1, 100), seconds_each=2 * SECONDS_CNN_PROFILE,
                    what="profile passes of the two networks")
-    n = (truths_name, truths, 300)
-    check_size(n, bytes_each=SBC_MEASUREMENTS * profile + 2 * 13 * 4 * 8, what="SBC drones' profiles and vectors")
-    check_size(n, k, seconds_each=SBC_MEASUREMENTS * SECONDS_SIMULATED_RAMP, what="simulated ramps of SBC drones")
+    simulated = [(truths_name, truths, 300, "SBC drones")]
+    if not training and args.specimens:  # sbc simulates its specimen drones with or without a route table
+        simulated.append(("--specimens", args.specimens, 50, "specimen drones"))
+    for name, count_, typical, what in simulated:
+        n = (name, count_, typical)
+        check_size(n, bytes_each=SBC_MEASUREMENTS * profile + 2 * 13 * 4 * 8, what=f"{what}' profiles and vectors")
+        check_size(n, k, seconds_each=SBC_MEASUREMENTS * SECONDS_SIMULATED_RAMP, what=f"simulated ramps of {what}")
     budget = ROUTE_SBC_SECONDS if training else args.time_budget
     spec_name = "--sbc-specimens" if training else "--specimens"
     specimens = (args.sbc_specimens if training else args.specimens) if routes else 0

@@ -102,6 +102,8 @@ SIZE_CASES = [
      ["--sbc-route-truths 1,000", "would take"]),
     ("sbc-truths", ["sbc", "--class", "HELI", "--ramps", "4", "--truths", "1000000000"],
      ["--truths 1,000,000,000", "would take"]),
+    ("sbc-specimens", ["sbc", "--class", "HELI", "--ramps", "4", "--truths", "3", "--specimens", "1000000000"],
+     ["--specimens 1,000,000,000", "would take"]),
     ("sbc-route-days", ["sbc", "--class", "HELI", "--ramps", "4", "--truths", "3000", "--route-truths", "3000"],
      ["--route-truths 3,000 (with --time-budget 60)", "would take"]),
     ("sbc-route-beyond-truths", ["sbc", "--class", "HELI", "--ramps", "4", "--truths", "3", "--route-truths", "5"],
