@@ -200,7 +200,7 @@ def _make_work(args, work: Path) -> Path | None:
 def run_sbc(args) -> int:
     from ..generator.acquisition import Acquisition
     from ..inference.estimator_job import estimator_sbc
-    from ..inference.diagnostics.routes import headline
+    from ..inference.diagnostics.routes import headline, score_by
     from ..inference.amortized.shipped import find
     from ..inference.settings import CalibrationSettings
     from ..radar.progress import progress_enabled
@@ -233,7 +233,7 @@ def run_sbc(args) -> int:
         for route, s in out["specimens"]["rows"].items():
             widths = " ".join(f"{v:.2f}" for k, v in s["width_over_truth"].items() if k.startswith("line"))
             result(f"{cls} K={args.ramps} {route} on {out['specimens']['drones']} specimen drones: log score "
-                   f"{s['log_score']:.2f}, lines' median 90% width / truth {widths}")
+                   f"{s['log_score']:.2f}{score_by(s)}, lines' median 90% width / truth {widths}")
     if "route_table" in out:
         t = out["route_table"]
         result(f"{cls} K={args.ramps} default route: {t['default']} ({t['default_by']})")

@@ -186,6 +186,8 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
         accepted.append(share)
         return lf.from_unbounded(u), True
 
+    amortized.log_density = lambda u, y, s: est.truncated_log_prob_u(u[None], y, s)[0]
+
     out = {"n_measurements": int(profiles.shape[1]),
            "amortized": run_sbc(amortized, truths, profiles, lf.names, prior_q=prior_q, seed=seed,
                                 to_unbounded=lf.to_unbounded, progress=progress, desc="SBC amortized")}
@@ -255,11 +257,12 @@ class Route:
         self.name, self.settings = name, settings
         self.path = None if isinstance(estimator, AmortizedEstimator) else str(estimator)
         self._est = estimator if isinstance(estimator, AmortizedEstimator) else None
+        self._last = None  # (seed, profiles, target, run) of the last smc run, for its density
 
     def __getstate__(self):
         if self.path is None:
             raise TypeError("a Route over an estimator in memory does not pickle: give its file's path")
-        return {"name": self.name, "settings": self.settings, "path": self.path, "_est": None}
+        return {"name": self.name, "settings": self.settings, "path": self.path, "_est": None, "_last": None}
 
     @property
     def est(self) -> AmortizedEstimator:
@@ -269,6 +272,21 @@ class Route:
             self._est = Route._cache[self.path]
         return self._est
 
+    def log_density(self, u: np.ndarray, y: np.ndarray, s: int) -> float:
+        """The route's own normalised log density at u (d,) given profiles y, for the
+        draws of ``self(y, n, s)`` (the route table's exact log score): the amortized
+        posterior's on the prior's support, or, for the smc route, that of its last call's
+        run (:func:`.amortized.tempered.log_density`; the same y and seed, else it runs again)."""
+        from .amortized.tempered import log_density
+
+        u = np.asarray(u, float)[None]
+        if self.name == "amortized":
+            return float(self.est.truncated_log_prob_u(u, y, s)[0])
+        if self._last is None or self._last[0] != s or self._last[1] is not y:
+            self(y, 1, s)
+        _, _, post, run = self._last
+        return float(log_density(u, post, lambda v: self.est.log_prob_u(v, y), run)[0])
+
     def __call__(self, y, n, s):
         from .amortized.tempered import smc_route
 
@@ -276,7 +294,8 @@ class Route:
         if self.name == "amortized":
             u, _ = est.sample_u(y, n, s, strict=False)
             return lf.from_unbounded(u), True
-        _, run = smc_route(est, y, self.settings, s, s)
+        post, run = smc_route(est, y, self.settings, s, s)
+        self._last = (s, y, post, run)
         draws = run.draws()
         pick = np.random.default_rng(s).choice(len(draws), size=n, replace=len(draws) < n)
         return lf.from_unbounded(draws[pick]), run.converged
@@ -314,8 +333,8 @@ def specimen_table(est: AmortizedEstimator, n: int, *, settings=None, seed: int 
 
 def _row(summary: dict) -> dict:
     """A route table row: the gate's figures, the log score, the widths, convergence, seconds."""
-    keep = ("outer_share", "coverage90_range", "tarp_atc", "log_score", "width_over_truth", "converged_share",
-            "n_replicates", "verdict")
+    keep = ("outer_share", "coverage90_range", "tarp_atc", "log_score", "log_score_by", "log_score_gaussian",
+            "width_over_truth", "converged_share", "n_replicates", "verdict")
     row = {k: summary[k] for k in keep if k in summary}
     row["seconds_median"] = float(np.median(summary["seconds"]))
     return row

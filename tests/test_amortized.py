@@ -605,6 +605,7 @@ def test_routes_over_a_file_pickle_and_run_in_workers_as_in_one_process(tiny):
 
     from mdaug.inference.diagnostics.routes import run
     from mdaug.inference.estimator_job import Route
+    from mdaug.inference.settings import CalibrationSettings
 
     est, path = tiny
     with pytest.raises(TypeError, match="give its file's path"):
@@ -613,9 +614,34 @@ def test_routes_over_a_file_pickle_and_run_in_workers_as_in_one_process(tiny):
     lf = est.label_free
     x, y = simulate(est.spec, 3, 8)
     truths = lf.quantities(x)
-    one = run(route, truths, y, lf.names, n_rank=19, seed=4)
-    two = run(Route("amortized", path), truths, y, lf.names, n_rank=19, seed=4, workers=2)
+    one = run(route, truths, y, lf.names, n_rank=19, seed=4, to_unbounded=lf.to_unbounded)
+    two = run(Route("amortized", path), truths, y, lf.names, n_rank=19, seed=4, workers=2,
+              to_unbounded=lf.to_unbounded)
     assert one["ranks"] == two["ranks"]  # drone i's draws depend on seed + i only
+    # the amortized route is a density: its log score is exact, the same in workers
+    assert one["log_score_by"] == two["log_score_by"] == "exact"
+    assert one["log_score_by_drone"] == pytest.approx(two["log_score_by_drone"], rel=1e-6)
+    want = [-est.truncated_log_prob_u(u[None], yi, 4 + i)[0]
+            for i, (u, yi) in enumerate(zip(lf.to_unbounded(truths), y))]
+    assert one["log_score_by_drone"] == pytest.approx(want, rel=1e-6)
+    # the smc route's density comes from its own run (evidence and start share), in workers too
+    smc = [run(Route("smc", path, CalibrationSettings(progress=False)), truths[:2], y[:2], lf.names, n_rank=19,
+               seed=4, to_unbounded=lf.to_unbounded, workers=w) for w in (1, 2)]
+    assert smc[0]["log_score_by"] == "exact" and np.all(np.isfinite(smc[0]["log_score_by_drone"]))
+    assert smc[0]["log_score_by_drone"] == pytest.approx(smc[1]["log_score_by_drone"], rel=1e-9)
+
+
+def test_the_truncated_density_is_the_flows_over_its_mass_inside_the_prior(tiny):
+    """truncated_log_prob_u = log q(u | x) - log(share of q's draws inside the prior),
+    the share the sampler itself measures (same seed), and never below log q."""
+    est, _ = tiny
+    _, y = simulate(est.spec, 1, 21)
+    u, _ = est.sample_u(y[0], 30, 5)
+    _, inside = est.sample_u(y[0], 1024, 9, strict=False)
+    got = est.truncated_log_prob_u(u, y[0], 9)
+    assert 0 < inside <= 1
+    np.testing.assert_allclose(got, est.log_prob_u(u, y[0]) - np.log(inside), rtol=1e-9)
+    assert np.all(got >= est.log_prob_u(u, y[0]))
 
 
 def test_tempered_smc_from_a_wide_proposal_weighs_distant_modes_right():
@@ -645,6 +671,36 @@ def test_tempered_smc_from_a_wide_proposal_weighs_distant_modes_right():
     assert d[right].std(0) == pytest.approx([0.5, 0.5], rel=0.15)
     with pytest.raises(ValueError, match="even number"):
         sample_tempered(Bimodal(), q.logpdf, start[:5], CalibrationSettings(progress=False), 3)
+
+
+def test_the_smc_routes_density_is_the_normalised_posterior_from_its_own_evidence():
+    """The target known only up to a constant (here + 5 nats), q restricted to a box:
+    the run's evidence and q's share inside give back the normalised posterior's log
+    density at any point, the bookkeeping the route table's exact log score relies on."""
+    from scipy.stats import multivariate_normal as mvn
+
+    from mdaug.inference.amortized.tempered import log_density, sample_tempered
+    from mdaug.inference.settings import CalibrationSettings
+
+    a, b = np.array([-3.0, 0.0]), np.array([3.0, 1.0])
+
+    def exact(u):
+        u = np.atleast_2d(u)
+        return np.logaddexp(np.log(0.3) + mvn(a, 0.25).logpdf(u), np.log(0.7) + mvn(b, 0.25).logpdf(u))
+
+    def post(u):  # unnormalised, zero outside the box
+        u = np.atleast_2d(u)
+        return np.where(np.all(np.abs(u) < 7, axis=1), exact(u) + 5.0, -np.inf)
+
+    q = mvn([0.0, 0.0], 16.0)
+    start = q.rvs(2000, random_state=np.random.default_rng(1))
+    run = sample_tempered(post, q.logpdf, start, CalibrationSettings(progress=False), 3)
+    run.extra["start_inside_share"] = float(np.mean(np.all(np.abs(start) < 7, axis=1)))
+    assert run.converged and 0.8 < run.extra["start_inside_share"] < 0.9
+    pts = np.array([[3.0, 1.0], [-3.0, 0.0], [2.5, 1.5], [-3.4, -0.3], [0.0, 0.5]])
+    got = log_density(pts, post, q.logpdf, run)
+    np.testing.assert_allclose(got, exact(pts), atol=0.15)  # the evidence's Monte Carlo error
+    assert log_density(np.array([[8.0, 0.0]]), post, q.logpdf, run)[0] == -np.inf
 
 
 def test_smc_route_on_the_summary_likelihood_reports_its_run_and_status(tiny):

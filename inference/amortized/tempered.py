@@ -82,6 +82,28 @@ def smc_route(est, profiles: np.ndarray, settings, start_seed, seed, plug_in: np
     (seeded by ``start_seed``) start :func:`sample_tempered` (seeded by ``seed``) to
     ``est.target(profiles, plug_in)``, the covariance held at ``plug_in`` (default: the
     starting draws' median). Returns (that target, the SamplerRun)."""
-    start, _ = est.sample_u(profiles, n_particles(settings, est.label_free.dim), start_seed, strict=False)
+    start, inside = est.sample_u(profiles, n_particles(settings, est.label_free.dim), start_seed, strict=False)
     post = est.target(profiles, plug_in=np.median(start, axis=0) if plug_in is None else plug_in)
-    return post, sample_tempered(post, lambda v: est.log_prob_u(v, profiles), start, settings, seed)
+    run = sample_tempered(post, lambda v: est.log_prob_u(v, profiles), start, settings, seed)
+    run.extra["start_inside_share"] = float(inside)
+    return post, run
+
+
+def log_density(u: np.ndarray, post, log_q, run: SamplerRun) -> np.ndarray:
+    """Normalised log density (n,) at u (n, d) of what the route's particles stand for:
+    the last tempered target, q restricted to the prior's support times (p(u | x) /
+    q(u))^beta, over its normaliser, which the SMC run estimated on its way (its
+    ``smc_log_z``: the sum of the log mean incremental weights) times the share of q
+    inside the support (``start_inside_share``). At beta = 1 (a converged run) that is
+    p(u | x) = exp(post(u)) / Z, the posterior of the file's likelihood, up to the
+    Monte Carlo error of the evidence estimate; -inf outside the support.
+    post, log_q: as :func:`sample_tempered` took them (log q: the flow's density)."""
+    u = np.atleast_2d(np.asarray(u, float))
+    beta, log_z = float(run.extra["smc_betas"][-1]), float(run.extra["smc_log_z"])
+    lp = post(u)
+    out = np.full(len(u), -np.inf)
+    ok = np.isfinite(lp)
+    if ok.any():
+        lq = log_q(u[ok])
+        out[ok] = lq - np.log(run.extra["start_inside_share"]) + beta * (lp[ok] - lq) - log_z
+    return out

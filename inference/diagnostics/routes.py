@@ -7,7 +7,10 @@ turns ranks into the rank chi-square p-values and the outer-10% share, 0.10 when
 honest), the coverage of central intervals at several levels (the coverage curve),
 the median 90% width over the truth beside the prior's, and TARP (Lemos et al. 2023,
 sbi's implementation: expected coverage of random reference balls; ATC near 0 and a
-large KS p-value when honest), and the log score of the truth (:mod:`.yardsticks`).
+large KS p-value when honest), and the log score of the truth (:mod:`.yardsticks`): exact
+where the route is a density (``draw.log_density(u_true, profiles, seed)``, its log density
+at the truth in the unbounded coordinates u, normalised on the prior's support), else a
+Gaussian fitted to its draws; the Gaussian's score is kept beside it for every route.
 """
 from __future__ import annotations
 
@@ -21,10 +24,13 @@ from .yardsticks import honest, log_score, verdict
 LEVELS = (0.5, 0.6, 0.7, 0.8, 0.9, 0.95)
 
 
-def _timed(draw, y, n, seed):
+def _timed(draw, y, n, seed, truth_u=None):
     t0 = time.perf_counter()
     dq, converged = draw(y, n, seed)
-    return dq, bool(converged), time.perf_counter() - t0
+    seconds = time.perf_counter() - t0
+    density = getattr(draw, "log_density", None)
+    ld = float(density(truth_u, y, seed)) if density is not None and truth_u is not None else None
+    return dq, bool(converged), seconds, ld
 
 
 def run(draw, truths_q: np.ndarray, data, names: list[str], *, n_rank: int = 199, prior_q: np.ndarray | None = None,
@@ -38,7 +44,8 @@ def run(draw, truths_q: np.ndarray, data, names: list[str], *, n_rank: int = 199
 
     recs, samples = [], []
     bar = progress_bar(total=len(truths_q), desc=desc, unit="drone", progress=progress)
-    jobs = [(draw, y, n_rank, seed + i) for i, y in enumerate(data)]
+    tu = np.asarray(truths_q, float) if to_unbounded is None else to_unbounded(truths_q)
+    jobs = [(draw, y, n_rank, seed + i, tu[i]) for i, y in enumerate(data)]
     if workers > 1 and len(jobs) > 1:
         from concurrent.futures import ProcessPoolExecutor
 
@@ -53,7 +60,7 @@ def run(draw, truths_q: np.ndarray, data, names: list[str], *, n_rank: int = 199
         for job in jobs:
             results.append(_timed(*job))
             bar.update(1)
-    for i, (q, (dq, converged, seconds)) in enumerate(zip(truths_q, results)):
+    for i, (q, (dq, converged, seconds, _)) in enumerate(zip(truths_q, results)):
         recs.append({"i": i, "ranks": np.sum(dq < q, axis=0).tolist(), "names": names,
                      "converged": converged, "seconds": seconds})
         samples.append(dq)
@@ -66,9 +73,9 @@ def run(draw, truths_q: np.ndarray, data, names: list[str], *, n_rank: int = 199
         lo, hi = np.quantile(prior_q, [0.05, 0.95], axis=0)
         out["prior_width_over_truth"] = dict(zip(names, map(float, np.median((hi - lo) / np.abs(truths_q), axis=0))))
     su = s if to_unbounded is None else np.stack([to_unbounded(d) for d in s])
-    tu = truths_q if to_unbounded is None else to_unbounded(truths_q)
     out.update(tarp(su, tu))
-    out.update(log_score(su, tu))
+    densities = [r[3] for r in results]
+    out.update(log_score(su, tu, None if None in densities else np.array(densities)))
     out["ranks"] = out["ranks"].tolist()
     return out
 
@@ -114,8 +121,14 @@ def headline(summary: dict) -> str:
     return (f"outer-10% share {summary['outer_share']:.3f} (honest 0.10), 90% coverage {lo:.2f}-{hi:.2f}, "
             f"rank chi-square pooled p {summary['pooled_p']:.3g}, TARP ATC {summary['tarp_atc']:.3f} "
             f"(KS p {summary['tarp_ks_p']:.2f}), "
-            + (f"log score {summary['log_score']:.2f}, " if "log_score" in summary else "")
+            + (f"log score {summary['log_score']:.2f}{score_by(summary)}, " if "log_score" in summary else "")
             + f"{summary['n_replicates']} truths")
+
+
+def score_by(row: dict) -> str:
+    """' (exact)' or ' (Gaussian fit)': how a row's log score was taken (rows written
+    before the exact score have no ``log_score_by``: theirs is the Gaussian's)."""
+    return " (exact)" if row.get("log_score_by") == "exact" else " (Gaussian fit)"
 
 
 def route_table(routes: dict, truths_q: np.ndarray, data, names: list[str], *, to_unbounded, n_rank: int = 199,

@@ -8,9 +8,14 @@ the same fresh drones by
   ``OUTER_MAX`` and every quantity's 90% coverage at least ``COVERAGE_MIN`` (a
   posterior wider than the data allow passes; it loses on the next yardstick);
 * the **log score** of the truth (:func:`log_score`): the mean of -log q(u_true | x)
-  over drones, in the unbounded label-free coordinates u, q a Gaussian fitted to the
-  route's draws (the same density family for every route, so the scores compare;
-  lower is sharper *and* right);
+  over drones, in the unbounded label-free coordinates u (lower is sharper *and*
+  right). q is the route's own normalised density where it has one (``log_score_by``
+  'exact': the amortized posterior's flow on the prior's support; the smc route's
+  target normalised by the evidence its own run estimated, up to that estimate's Monte
+  Carlo error), else a Gaussian fitted to the route's draws ('gaussian'; a draws-only
+  route). The Gaussian's score is kept beside it for every route
+  (``log_score_gaussian``: one density family, which reads a multimodal posterior's
+  truths between modes as likely and a sharp posterior's rare far truths as costly);
 * the median 90% width over the truth per quantity (:mod:`.routes`), beside the
   Cramer-Rao bound where the route has a likelihood.
 
@@ -39,8 +44,11 @@ def gaussian_log_density(samples: np.ndarray, points: np.ndarray, ridge: float =
     return -0.5 * (r * r).sum(-1) - np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(-1) - 0.5 * d * np.log(2 * np.pi)
 
 
-def log_score(samples_u: np.ndarray, truths_u: np.ndarray) -> dict:
-    """Mean and per-drone -log q(u_true | x) (module doc): samples_u (S, R, d), truths_u (R, d)."""
-    nl = -gaussian_log_density(samples_u, truths_u)
+def log_score(samples_u: np.ndarray, truths_u: np.ndarray, log_density: np.ndarray | None = None) -> dict:
+    """Mean and per-drone -log q(u_true | x) (module doc): samples_u (S, R, d), truths_u
+    (R, d); log_density (R,): the route's own log density at each truth, where it has one."""
+    gauss = -gaussian_log_density(samples_u, truths_u)
+    nl = gauss if log_density is None else -np.asarray(log_density, float)
     return {"log_score": float(np.mean(nl)), "log_score_median": float(np.median(nl)),
-            "log_score_by_drone": nl.tolist()}
+            "log_score_by_drone": nl.tolist(), "log_score_by": "gaussian" if log_density is None else "exact",
+            "log_score_gaussian": float(np.mean(gauss))}

@@ -4,7 +4,7 @@ python tests/benchmarks/amortized_log_score.py --class QUAD --ramps 32 FILE_A FI
     [--specimens 200] [--truths 300] [--draws 500] [--seed 6363]
 
 The amortized posterior is a density, so its log score needs no density fitted to draws
-(the route table's Gaussian): -log q(u_true | x), the flow's own density at the truth in
+(the Gaussian the route table uses for routes without one): -log q(u_true | x), the flow's own density at the truth in
 the label-free coordinates u, truncated to the prior (minus the log of the share of q's
 draws that fall inside it, from --draws draws). For --specimens drones of the specimen
 model around the class reference (where users' drones are) and --truths drones of the
@@ -28,12 +28,8 @@ import numpy as np  # noqa: E402
 
 def exact_log_scores(est, truths_u: np.ndarray, profiles: np.ndarray, draws: int) -> np.ndarray:
     """(R,) -log q(u_true | x) of the amortized posterior truncated to the prior, per drone."""
-    out = np.empty(len(truths_u))
-    for i, (u, y) in enumerate(zip(truths_u, profiles)):
-        lp = est.log_prob_u(u[None], y)[0]
-        _, inside = est.sample_u(y, draws, i, strict=False)
-        out[i] = -(lp - np.log(max(inside, 1.0 / (20 * draws))))
-    return out
+    return np.array([-est.truncated_log_prob_u(u[None], y, i, draws)[0]
+                     for i, (u, y) in enumerate(zip(truths_u, profiles))])
 
 
 def main(argv=None) -> int:

@@ -42,11 +42,13 @@ def table(rows: dict, names: list[str], crb: dict | None = None) -> str:
     for name, r in rows.items():
         lo, hi = r["coverage90_range"]
         lines.append(f"{name:10s} {r.get('verdict', ''):13s} {r['outer_share']:6.3f} {lo:4.2f}-{hi:4.2f} "
-                     f"{r['log_score']:9.2f} {r['converged_share']:5.2f} {r['seconds_median']:7.1f}  "
+                     f"{r['log_score']:8.2f}{'*' if r.get('log_score_by') == 'exact' else ' '} "
+                     f"{r['converged_share']:5.2f} {r['seconds_median']:7.1f}  "
                      + " ".join(f"{r['width_over_truth'][n]:.2f}" for n in names))
     if crb:
         lines.append(f"{'CRB':10s} {'':13s} {'':6s} {'':10s} {'':9s} {'':5s} {'':7s}  "
                      + " ".join(f"{crb[n]:.2f}" for n in names))
+    lines.append("(* the route's own density at the truth; else a Gaussian fitted to its draws)")
     return "\n".join(lines)
 
 
