@@ -136,7 +136,7 @@ def run_train(args) -> int:
                               device=args.device, net_cfg=default_nets(cls), train_cfg=cfg,
                               post_budget=args.posterior_budget, ratio_budget=args.ratio_budget,
                               sbc_truths=args.sbc_truths, sbc_route_truths=args.sbc_route_truths,
-                              sbc_specimens=args.sbc_specimens,
+                              sbc_specimens=args.sbc_specimens, temperature_truths=args.temperature_truths,
                               summary=not args.no_summary, near_simulations=args.near_simulations,
                               summary_cfg=_summary_config(args), start=start,
                               command=_command(args, cls, cfg.max_epochs),
@@ -292,6 +292,10 @@ def add_train(sub, parents, help):
                    help="with --sbc-route-truths: drones like a user's (the specimen model around the class "
                         "reference) through both routes; the default route is the best log score on them among "
                         "the routes that pass the gate (default: %(default)s; 0: judged on the prior drones)")
+    p.add_argument("--temperature-truths", type=nonneg_int, default=0, metavar="N",
+                   help="fresh drones on which the amortized posterior's temperature is chosen before its SBC: "
+                        "among those whose SBC passes the gate there, the best exact log score of the truth "
+                        "(default: %(default)s: the flow as trained, temperature 1)")
     p.add_argument("--no-summary", action="store_true",
                    help="no summary likelihood (the smc route then uses the likelihood ratio network)")
     p.add_argument("--near-simulations", type=count(0, MAX_SIMULATIONS), default=None, metavar="N",

@@ -25,6 +25,7 @@ from .amortized.target import LabelFree
 from .amortized.train import TrainConfig, device_of, fit, posterior_loss, ratio_loss
 from .diagnostics.routes import headline
 from .diagnostics.routes import run as run_sbc
+from .temperature import amortized_draw
 
 SBC_MEASUREMENTS = 5
 NEAR_WIDTH = 4.0
@@ -58,6 +59,7 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
                     post_budget: float | None = None, ratio_budget: float | None = None,
                     sim_budget: float | None = None,
                     sbc_truths: int = 300, sbc_route_truths: int = 0, route_settings=None, sbc_specimens: int = 50,
+                    temperature_truths: int = 0,
                     shard_size: int = 500,
                     summary: bool = True, near_simulations: int | None = None, near_width: float = NEAR_WIDTH,
                     summary_cfg=None, start: AmortizedEstimator | None = None, command: str | None = None,
@@ -71,7 +73,9 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
     ran the job (kept in the file, so anyone can train it again); start: an estimator
     of the same spec and networks whose weights the training starts from (more drones
     refine a file instead of training from scratch; a budget of 0 keeps that network as
-    it is); its summary likelihood is kept, not retrained, unless ``summary`` is False."""
+    it is); its summary likelihood is kept, not retrained, unless ``summary`` is False;
+    temperature_truths: fresh drones on which the amortized posterior's temperature is
+    chosen (:func:`.temperature.fit_temperature`) before its own SBC, on other drones."""
     import torch
 
     t0 = time.perf_counter()
@@ -112,6 +116,9 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
                     shard_size=shard_size, config=summary_cfg, progress=progress, log=log)
     est.meta.update(n_simulations=int(len(u)), seed=int(seed), simulation_seconds=t_sim, command=command,
                     training={"config": train_cfg.to_dict(), "device": str(dev), **logs}, sbc={})
+    if temperature_truths:
+        choose_temperature(est, temperature_truths, seed=child_seed(seed, "temperature"), workers=workers,
+                           progress=progress, log=log)
     est.save(out)  # usable now; rewritten with its SBC figures below
     if sbc_truths:
         est.meta["sbc"] = estimator_sbc(est, sbc_truths, seed=child_seed(seed, "sbc"), workers=workers,
@@ -123,6 +130,21 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
     est.save(out)
     log(f"estimator written to {out} ({time.perf_counter() - t0:.0f} s in all)")
     return est
+
+
+def choose_temperature(est: AmortizedEstimator, n: int, *, seed, workers: int = 1, progress=None,
+                       log=print) -> dict:
+    """Choose ``est``'s temperature on n fresh prior drones (:func:`.temperature.fit_temperature`)
+    and state it in the file's meta (``temperature``, ``temperature_fit``); returns the fit."""
+    from .temperature import fit_temperature
+
+    vectors, profiles = sbc_data(est.spec, n, seed, workers)
+    log(f"  choosing the amortized posterior's temperature on {n} fresh drones")
+    fit = fit_temperature(est, est.label_free.quantities(vectors), profiles, seed=seed, progress=progress, log=log)
+    est.meta.update(temperature=fit["temperature"], temperature_fit=fit)
+    log(f"  temperature {fit['temperature']:g} ({'passes the gate' if fit['passed'] else 'none passes the gate'} "
+        f"on those drones)")
+    return fit
 
 
 def check_start(start: AmortizedEstimator, spec: SimulationSpec, net_cfg: NetConfig) -> None:
@@ -180,16 +202,8 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
     prior_q = lf.quantities(space.vectors(space.sample_prior(4000, np.random.default_rng(seed_sequence(seed, "prior")))))
 
     accepted = []
-
-    def amortized(y, n, s):
-        u, share = est.sample_u(y, n, s, strict=False)
-        accepted.append(share)
-        return lf.from_unbounded(u), True
-
-    amortized.log_density = lambda u, y, s: est.truncated_log_prob_u(u[None], y, s)[0]
-
     out = {"n_measurements": int(profiles.shape[1]),
-           "amortized": run_sbc(amortized, truths, profiles, lf.names, prior_q=prior_q, seed=seed,
+           "amortized": run_sbc(amortized_draw(est, accepted), truths, profiles, lf.names, prior_q=prior_q, seed=seed,
                                 to_unbounded=lf.to_unbounded, progress=progress, desc="SBC amortized")}
     out["amortized"]["inside_prior_share"] = float(np.mean(accepted))
     log(f"  SBC amortized: {headline(out['amortized'])}; draws inside the prior {np.mean(accepted):.3f}")

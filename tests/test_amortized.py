@@ -214,6 +214,38 @@ def test_tampered_or_truncated_estimator_is_refused(tiny, tmp_path):
             AmortizedEstimator.load(p)
 
 
+def test_a_tempered_flow_draws_what_its_density_says_and_the_file_keeps_its_temperature(tiny, tmp_path):
+    """At temperature T the draws are the flow's transform of T x a standard normal and
+    log_prob_u is their density: importance weights back to the T = 1 flow average 1."""
+    est, _ = tiny
+    _, y = simulate(est.spec, 1, 21)
+    hot = est.at_temperature(1.5)
+    assert est.temperature == 1.0 and hot.temperature == 1.5 and hot.posterior is est.posterior
+    torch.manual_seed(0)
+    with torch.inference_mode():
+        u = hot._flow_draws(4000, hot.condition(y[0]))
+        cold = est._flow_draws(4000, est.condition(y[0]))
+    w = np.exp(est.log_prob_u(u, y[0]) - hot.log_prob_u(u, y[0]))
+    assert w.mean() == pytest.approx(1.0, abs=0.1)
+    assert np.all(u.std(0) > cold.std(0))  # every quantity wider
+    hot.save(tmp_path / "hot.zip")
+    back = AmortizedEstimator.load(tmp_path / "hot.zip")
+    assert back.temperature == 1.5
+    np.testing.assert_allclose(back.log_prob_u(u[:5], y[0]), hot.log_prob_u(u[:5], y[0]), rtol=1e-6)
+    with zipfile.ZipFile(tmp_path / "hot.zip") as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    for bad in (0.5, 9.0, "1.2", float("nan")):
+        meta = json.loads(members["meta.json"])
+        meta["temperature"] = bad
+        p = tmp_path / "bad.zip"
+        with zipfile.ZipFile(p, "w") as z:
+            for k, v in {**members, "meta.json": json.dumps(meta).encode()}.items():
+                z.writestr(k, v)
+        with pytest.raises(EstimatorError, match=r"bad.zip: meta.json field 'temperature' must be a number from 1 "
+                                                 r"to 4, got"):
+            AmortizedEstimator.load(p)
+
+
 def test_an_estimator_of_another_target_version_is_refused(tmp_path):
     """A QUAD estimator whose quantities order the engines by their lowest line (target
     version 1) is refused by field, with the command that retrains it."""
@@ -410,8 +442,14 @@ def test_train_estimator_and_sbc_verbs(tmp_path, capsys, refused):
     assert meta["n_simulations"] == 100
     assert meta["command"].startswith("mdaug train-estimator --class HELI --ramps 4 --simulations 100")
     assert AmortizedEstimator.load(out).summary is not None  # trained beside the networks
-    assert main(argv[:-1] + [str(tmp_path / "h2.zip"), "--work", f"{out}.work", "--no-summary"]) == 0
-    assert "resumed at epoch 1" in capsys.readouterr().out
+    assert meta.get("temperature", 1.0) == 1.0 and "temperature_fit" not in meta  # not asked for
+    assert main(argv[:-1] + [str(tmp_path / "h2.zip"), "--work", f"{out}.work", "--no-summary",
+                             "--temperature-truths", "4"]) == 0
+    text = capsys.readouterr().out
+    assert "resumed at epoch 1" in text and "temperature" in text
+    hot = AmortizedEstimator.load(tmp_path / "h2.zip")
+    fit = hot.meta["temperature_fit"]
+    assert hot.temperature == fit["temperature"] and fit["drones"] == 4 and len(fit["rows"]) == 7
     js = tmp_path / "sbc.json"
     assert main(["sbc", "--class", "HELI", "--ramps", "4", "--estimator", str(out), "--truths", "3",
                  "--route-truths", "2", "--specimens", "2", "--time-budget", "5", "--json", str(js)]) == 0

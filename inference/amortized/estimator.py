@@ -12,6 +12,7 @@ command that trains the right one.
 """
 from __future__ import annotations
 
+import copy
 import io
 import json
 import zipfile
@@ -38,6 +39,9 @@ from the amortized posterior to the posterior of the file's likelihood (the summ
 likelihood where the file has one, else the ratio network's; :mod:`.tempered`).
 (nlopt + emcee started from the amortized draws lost to both on every row of the
 route tables, docs/calibration.md, and left the package.)"""
+MAX_TEMPERATURE = 4.0
+"""Largest flow temperature a file may state (a posterior four times wider than trained
+says little more than the prior; :mod:`mdaug.inference.temperature` searches 1-2)."""
 META_FIELDS = ("format", "spec", "prior", "net", "n_simulations", "label_free", "training", "sbc", "seed")
 
 
@@ -75,6 +79,21 @@ class AmortizedEstimator:
         by its route table: the best log score among the routes that pass SBC), else
         the amortized posterior."""
         return self.meta.get("default_route", "amortized")
+
+    @property
+    def temperature(self) -> float:
+        """The flow's base temperature T >= 1 (meta field ``temperature``, 1 when absent):
+        draws are the flow's transform of T x a standard normal, so T > 1 widens every
+        mode of the posterior in its own shape, and :meth:`log_prob_u` is the density of
+        those draws. Chosen on fresh drones by SBC and the log score
+        (:mod:`mdaug.inference.temperature`); stated in the file."""
+        return float(self.meta.get("temperature", 1.0))
+
+    def at_temperature(self, t: float) -> "AmortizedEstimator":
+        """This estimator (the same networks) drawing at temperature ``t``."""
+        new = copy.copy(self)
+        new.meta = dict(self.meta, temperature=float(t))
+        return new
 
     @property
     def likelihood_name(self) -> str:
@@ -176,7 +195,7 @@ class AmortizedEstimator:
         with torch.inference_mode():
             while kept < n and tried < 20 * n:
                 k = max(2 * (n - kept), 1024)
-                u = self.posterior.sample((k,), condition=cond).reshape(k, -1).double().cpu().numpy()
+                u = self._flow_draws(k, cond)
                 _, ok = self.label_free.vectors(self.label_free.from_unbounded(u))
                 ok &= np.all(np.isfinite(u), axis=1)
                 out.append(u[ok])
@@ -190,18 +209,32 @@ class AmortizedEstimator:
                                  "measurements are unlike anything in its training set")
         return u, kept / tried
 
+    def _flow_draws(self, k: int, cond: torch.Tensor) -> np.ndarray:
+        """k draws (k, d) of the flow at the file's temperature (torch's seeded generator)."""
+        t = self.temperature
+        if t == 1.0:
+            return self.posterior.sample((k,), condition=cond).reshape(k, -1).double().cpu().numpy()
+        flow = self.posterior.net
+        context = flow._embedding_net(cond).expand(k, -1)
+        noise = t * torch.randn(k, self.label_free.dim, device=context.device)
+        u, _ = flow._transform.inverse(noise, context=context)
+        return u.double().cpu().numpy()
+
     def log_prob_u(self, u: np.ndarray, profiles: np.ndarray) -> np.ndarray:
         """Log density of the amortized posterior at u (n, d) given prepared profiles
         (M, L). The profiles are embedded once: sbi's ``log_prob`` expands the condition
         to every draw and embeds each copy (n CNN passes over M profiles), so this runs
         the steps of its nflows flow (embedding, transform, base density) itself, with
-        the one embedding; the same numbers (``tests/test_amortized.py``)."""
+        the one embedding; the same numbers (``tests/test_amortized.py``); at the file's
+        temperature T the base is N(0, T^2 I), the density of :meth:`sample_u`'s draws."""
         flow = self.posterior.net  # the nflows Flow inside sbi's estimator
         with torch.inference_mode():
             t = torch.as_tensor(np.asarray(u, np.float32), device=self._device).reshape(len(u), -1)
             context = flow._embedding_net(self.condition(profiles)).expand(len(t), -1)
             noise, log_det = flow._transform(t, context=context)
-            return (flow._distribution.log_prob(noise, context=context) + log_det).double().cpu().numpy()
+            temp = self.temperature
+            base = flow._distribution.log_prob(noise / temp, context=context) - t.shape[1] * np.log(temp)
+            return (base + log_det).double().cpu().numpy()
 
     def truncated_log_prob_u(self, u: np.ndarray, profiles: np.ndarray, seed: int, n_draws: int = 1024) -> np.ndarray:
         """Log density (n,) at u (n, d) of the posterior :meth:`sample_u` draws from: the
@@ -290,6 +323,10 @@ class AmortizedEstimator:
                                  f"this mdaug simulates {SIMULATOR!r}; retrain with: {train_command(spec)}")
         _check_prior(meta, spec, src)
         _check_fields(meta, src)
+        t = meta.get("temperature", 1.0)
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not 1.0 <= t <= MAX_TEMPERATURE:
+            raise EstimatorError(f"{src}: meta.json field 'temperature' must be a number from 1 to "
+                                 f"{MAX_TEMPERATURE:g}, got {t!r}")
         ref = spec.reference
         if ref.n_engines > 1 and meta.get("target", 1) != TARGET:  # one engine: every version is the same
             raise EstimatorError(f"{src}: meta.json field 'target' is {meta.get('target', 1)!r}: its quantities "
