@@ -449,7 +449,7 @@ def test_train_estimator_and_sbc_verbs(tmp_path, capsys, refused):
     assert "resumed at epoch 1" in text and "temperature" in text
     hot = AmortizedEstimator.load(tmp_path / "h2.zip")
     fit = hot.meta["temperature_fit"]
-    assert hot.temperature == fit["temperature"] and fit["drones"] == 4 and len(fit["rows"]) == 7
+    assert hot.temperature == fit["temperature"] and fit["drones"] == 4 and f"{fit['temperature']:g}" in fit["rows"]
     js = tmp_path / "sbc.json"
     assert main(["sbc", "--class", "HELI", "--ramps", "4", "--estimator", str(out), "--truths", "3",
                  "--route-truths", "2", "--specimens", "2", "--time-budget", "5", "--json", str(js)]) == 0
