@@ -83,8 +83,10 @@ def amortized_report(res, identified_ratio: float) -> str:
              f"acquisition: {res.acquisition.describe()}; every nuisance marginalised by training on the scene "
              "simulator",
              f"estimator: {est['class']} K = {est['ramps']}, {est['simulations']} simulated drones ({est['simulator']})"]
+    temp = est.get("temperature", 1.0)
     lines.append(f"amortized posterior: {d['amortized_seconds'] * 1e3:.0f} ms, {d['amortized_inside_prior']:.0%} of "
-                 "its draws inside the prior")
+                 "its draws inside the prior" + (f", drawn at temperature {temp:g} (the file's, chosen by SBC and "
+                                                 "log score on fresh drones)" if temp != 1.0 else ""))
     if "smc" in d:
         m = d["smc"]
         which = {"summary": "the summary likelihood", "ratio": "the learned likelihood ratio"}.get(
