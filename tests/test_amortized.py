@@ -390,6 +390,13 @@ def test_calibrate_verb_writes_an_amortized_posterior(tiny, tmp_path, capsys):
     assert ("tempered SMC from the amortized posterior on the summary likelihood (run for the best fit and as a "
             "check)") in text.out
     assert "other_route" in CalibrationResult.load(checked, class_name="HELI").idata.groups()
+    assert "temperature" not in text.out  # the flow as trained: nothing to say
+    hot = tmp_path / "hot.zip"
+    est.at_temperature(1.2).save(hot)
+    assert main(["calibrate", str(data), "--class", "HELI", "--out", str(tmp_path / "hot.nc"), "--estimator",
+                 str(hot), "--time-budget", "20", "--seed", "5"]) == 0
+    assert "its draws inside the prior, drawn at temperature 1.2 (the file's" in capsys.readouterr().out
+    assert CalibrationResult.load(tmp_path / "hot.nc", class_name="HELI").diagnostics["estimator"]["temperature"] == 1.2
 
 
 def test_calibrate_verb_refuses_what_the_estimator_cannot_take(tiny, tmp_path, refused):

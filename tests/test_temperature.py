@@ -2,7 +2,6 @@
 conjugate toy whose exact posterior is known: a flow 0.7 x too narrow is overconfident at
 T = 1, and the choice is the temperature that undoes it, not a wider one that also passes."""
 import numpy as np
-import pytest
 from scipy.stats import norm
 
 from mdaug.inference.temperature import GRID, fit_temperature
