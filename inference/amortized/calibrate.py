@@ -165,7 +165,8 @@ def _crb(post, u) -> dict:
 def _estimator_info(est) -> dict:
     m = est.meta
     return {"class": est.class_name, "ramps": est.spec.acquisition.ramps, "simulations": m.get("n_simulations"),
-            "simulator": m["spec"].get("simulator"), "temperature": est.temperature, "sbc": {r: {k: m["sbc"][r].get(k) for k in
+            "simulator": m["spec"].get("simulator"), "temperature": est.temperature,
+            "sbc": {r: {k: m["sbc"][r].get(k) for k in
                                                                  ("outer_share", "coverage90_range", "n_replicates", "pooled_p")}
                                                              for r in m.get("sbc", {}) if isinstance(m["sbc"][r], dict)
                                                              and "outer_share" in m["sbc"][r]}}
