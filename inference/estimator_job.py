@@ -293,9 +293,9 @@ class Route:
         run (:func:`.amortized.tempered.log_density`; the same y and seed, else it runs again)."""
         from .amortized.tempered import log_density
 
-        u = np.asarray(u, float)[None]
         if self.name == "amortized":
-            return float(self.est.truncated_log_prob_u(u, y, s)[0])
+            return amortized_draw(self.est).log_density(u, y, s)
+        u = np.asarray(u, float)[None]
         if self._last is None or self._last[0] != s or self._last[1] is not y:
             self(y, 1, s)
         _, _, post, run = self._last
@@ -306,8 +306,7 @@ class Route:
 
         est, lf = self.est, self.est.label_free
         if self.name == "amortized":
-            u, _ = est.sample_u(y, n, s, strict=False)
-            return lf.from_unbounded(u), True
+            return amortized_draw(est)(y, n, s)
         post, run = smc_route(est, y, self.settings, s, s)
         self._last = (s, y, post, run)
         draws = run.draws()
