@@ -174,6 +174,97 @@ def test_the_widening_recovers_an_edge_widening_and_the_file_keeps_it():
     assert "quadratic" not in fit_widening(u, gaps, 8, quadratic=False)
 
 
+def test_a_raised_widening_is_w_to_the_power_times_the_scale_and_keeps_one_at_one():
+    """raise_widening: log w' = power x log w + log scale wherever the clip does not bind;
+    a drone the fit leaves at w = 1 (raw log w well below 0) stays at 1; the input is not
+    changed; bad numbers are refused by name."""
+    from types import SimpleNamespace
+
+    from mdaug.inference.emulator.model import SummaryModel
+    from mdaug.inference.emulator.train import raise_widening
+
+    w = {"intercept": 0.2, "slope": [0.3, -0.1], "quadratic": [0.05, 0.0], "centre": [0.0, 0.0], "scale": [1.0, 1.0]}
+    model = SummaryModel.__new__(SummaryModel)
+    model.label_free = SimpleNamespace(dim=2)
+    u = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, -1.0], [-3.0, 0.0]])
+    model.widening = w
+    log_w = np.log(model.widen(u))
+    model.widening = raise_widening(w, power=2.5, scale=1.3)
+    got = np.log(model.widen(u))
+    raw = 0.2 + u @ [0.3, -0.1] + (u * u) @ [0.05, 0.0]  # before the clip
+    assert got == pytest.approx(np.clip(2.5 * raw + np.log(1.3), 0, 5))
+    assert got[:3] == pytest.approx(2.5 * log_w[:3] + np.log(1.3))  # where w > 1: w^2.5 x 1.3
+    assert raw[3] < 0 and got[3] == 0.0  # a drone the fit leaves at w = 1 stays at 1
+    assert w["intercept"] == 0.2 and w["slope"] == [0.3, -0.1]  # a copy
+    for bad in ({"power": 0.0}, {"power": float("nan")}, {"scale": -1.0}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            raise_widening(w, **bad)
+
+
+def test_the_fisher_information_holds_the_widening_at_its_value_and_counts_no_slope_of_it():
+    """A linear emulator (mean A u, covariance W / n, no error) widened by a w(u) that varies
+    with u: the Fisher information is A' (w(u0) W / n)^-1 A, as for the constant w(u0); the
+    widening's slope adds nothing."""
+    from types import SimpleNamespace
+
+    from mdaug.inference.emulator.model import SummaryModel
+
+    rng = np.random.default_rng(6)
+    a = rng.normal(size=(5, 2))
+    wcov = np.diag([0.5, 1.0, 2.0, 1.5, 0.8])
+    model = SummaryModel.__new__(SummaryModel)
+    model.label_free, model.inflation = SimpleNamespace(dim=2), 1.0
+    model.nets = lambda u, covariance=True: (np.atleast_2d(u) @ a.T, np.repeat(wcov[None], len(np.atleast_2d(u)), 0),
+                                             np.zeros((len(np.atleast_2d(u)), 2)))
+    model.widening = {"intercept": 0.4, "slope": [0.8, -0.5], "centre": [0.0, 0.0], "scale": [1.0, 1.0]}
+    u0 = np.array([0.3, 0.2])
+    w0 = model.widen(u0[None])[0]
+    assert w0 > 1.5
+    expected = a.T @ np.linalg.solve(w0 * wcov / 5, a)
+    assert model.fisher(u0, 5) == pytest.approx(expected, rel=1e-6)
+
+
+def test_refit_widening_raises_the_files_own_fit_without_simulating(tmp_path, capsys):
+    """tests/benchmarks/refit_widening.py with no drones: the shipped HELI K = 32 fit (its stated
+    power 3 divided out) raised to 1.5 halves every coefficient of log w, the stale route table
+    goes, the file says how; raised back to 3 it is the shipped widening again. A file with no
+    summary likelihood is refused, naming it."""
+    import importlib.util
+    from pathlib import Path
+
+    from mdaug.inference.amortized.estimator import AmortizedEstimator
+    from mdaug.inference.amortized.shipped import shipped_path
+
+    path = Path(__file__).parent / "benchmarks" / "refit_widening.py"
+    spec = importlib.util.spec_from_file_location("refit_widening", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    shipped = AmortizedEstimator.load(shipped_path("HELI", 32))
+    assert shipped.meta["summary"]["training"]["widening_refit"]["power"] == 3.0
+    none = ["--prior", "0", "--near", "0", "--specimens", "0"]
+    assert bench.main(["--class", "HELI", "--ramps", "32", *none, "--power", "1.5", "--chosen-by", "a test",
+                       "--out", str(tmp_path / "half.zip")]) == 0
+    half = AmortizedEstimator.load(tmp_path / "half.zip")
+    w0, w1 = shipped.summary.widening, half.summary.widening
+    assert w1["intercept"] == pytest.approx(0.5 * w0["intercept"])
+    assert w1["slope"] == pytest.approx(0.5 * np.asarray(w0["slope"]))
+    assert w1["quadratic"] == pytest.approx(0.5 * np.asarray(w0["quadratic"]))
+    record = half.meta["summary"]["training"]["widening_refit"]
+    assert record["power"] == 1.5 and record["chosen_by"] == "a test" and record["raised_from"] == "heli-k32.zip"
+    assert "route_table" not in half.meta["sbc"] and half.default_route == "amortized"
+    assert bench.main(["--class", "HELI", "--ramps", "32", "--from-file", str(tmp_path / "half.zip"), *none,
+                       "--power", "3", "--out", str(tmp_path / "back.zip")]) == 0
+    back = AmortizedEstimator.load(tmp_path / "back.zip").summary.widening
+    for key in ("intercept", "slope", "quadratic"):
+        assert back[key] == pytest.approx(w0[key])
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:  # K = 4 ships no summary likelihood
+        bench.main(["--class", "HELI", "--ramps", "4", *none, "--out", str(tmp_path / "k4.zip")])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "heli-k4.zip" in err and "summary likelihood" in err
+    assert not (tmp_path / "k4.zip").exists()
+
+
 def test_nearest_drones_are_the_nearest_in_whitened_units():
     from mdaug.inference.emulator.train import nearest_drones
 

@@ -240,3 +240,26 @@ def fit_widening(u: np.ndarray, gaps: np.ndarray, dim: int, quadratic: bool = Tr
     if quadratic:
         out["quadratic"] = best.x[d + 1:].tolist()
     return out
+
+
+def raise_widening(widening: dict, power: float = 1.0, scale: float = 1.0) -> dict:
+    """The widening w(u)^power x scale (a copy): log w's intercept, slopes and quadratic
+    terms times ``power``, then log ``scale`` added to the intercept.
+
+    A constant scale widens every drone alike, where the gap fit found the emulator right
+    (w near 1: the drones near the class reference it was trained on densely) as much as
+    where it found it wrong. A power > 1 widens most where the fitted w is already
+    largest and leaves drones the fit put at w = 1 at 1: one extra number, chosen like the scale by the route's
+    SBC on held-out prior drones (docs/calibration.md, HELI K = 32). ``model.widen`` still
+    clips log w to [0, 5], so the result is max(1, w_raw^power x scale), w_raw the fit
+    before its clip."""
+    if not (np.isfinite(power) and power > 0):
+        raise ValueError(f"power must be a finite number > 0, got {power!r}")
+    if not (np.isfinite(scale) and scale > 0):
+        raise ValueError(f"scale must be a finite number > 0, got {scale!r}")
+    out = {k: (list(v) if isinstance(v, (list, tuple, np.ndarray)) else v) for k, v in widening.items()}
+    out["intercept"] = float(power * widening["intercept"] + np.log(scale))
+    for key in ("slope", "quadratic"):
+        if key in widening:
+            out[key] = (float(power) * np.asarray(widening[key], float)).tolist()
+    return out
