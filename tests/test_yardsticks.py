@@ -196,6 +196,9 @@ def test_a_raised_widening_is_w_to_the_power_times_the_scale_and_keeps_one_at_on
     assert got[:3] == pytest.approx(2.5 * log_w[:3] + np.log(1.3))  # where w > 1: w^2.5 x 1.3
     assert raw[3] < 0 and got[3] == 0.0  # a drone the fit leaves at w = 1 stays at 1
     assert w["intercept"] == 0.2 and w["slope"] == [0.3, -0.1]  # a copy
+    back = raise_widening(raise_widening(w, 2.5, 1.3), 1 / 2.5, 1.3 ** (-1 / 2.5))  # undone
+    for key in ("intercept", "slope", "quadratic"):
+        assert back[key] == pytest.approx(w[key])
     for bad in ({"power": 0.0}, {"power": float("nan")}, {"scale": -1.0}):
         with pytest.raises(ValueError, match=next(iter(bad))):
             raise_widening(w, **bad)

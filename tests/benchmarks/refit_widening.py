@@ -109,9 +109,8 @@ def main(argv=None) -> int:
         if not old:
             ap.error(f"{path}: its summary likelihood has no widening to raise; give drones (--prior N) to fit one")
         was = est.meta["summary"].get("training", {}).get("widening_refit", {})
-        fit = raise_widening(old, 1.0 / float(was.get("power", 1.0)), 1.0)
-        fit["intercept"] -= float(np.log(was.get("scale", 1.0))) / float(was.get("power", 1.0))
-        new = raise_widening(fit, a.power, a.scale)
+        p, s = float(was.get("power", 1.0)), float(was.get("scale", 1.0))
+        new = raise_widening(raise_widening(old, 1.0 / p, s ** (-1.0 / p)), a.power, a.scale)  # (w^p s)^(1/p) s^(-1/p)
         kept = {k: v for k, v in was.items() if k not in ("command", "made_by", "scale_chosen_by", "chosen_by")}
         return _write(est, model, new, {**kept, "fit_command": was.get("fit_command", was.get("command")),
                                         "fit_made_by": was.get("fit_made_by", was.get("made_by")),
