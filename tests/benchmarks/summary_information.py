@@ -74,7 +74,6 @@ def bound(diffs, draws, m: int):
 
 
 def main(argv=None) -> int:
-
     import numpy as np
 
     from mdaug.generator.augment import Renderer
