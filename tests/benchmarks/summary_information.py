@@ -23,7 +23,11 @@ not cancel fully between the two points: the plain estimate grew from 0.33 to 0.
 line 1 between 400 and 6,000 draws); that term, from the draws' own differences, is
 subtracted. With S estimated from N draws in p dimensions the information is still overstated
 by about N / (N - p) (1.09 for 256 of 3,000). The split-half line (J and S from each half of
-the draws alone) shows how far the figures move.
+the draws alone) shows how far the figures move. A marginal bound also depends on how the
+slopes line up with each other, and noisy slopes of faintly seen quantities look more
+independent than they are: where a quantity's slope is not well above its noise, the other
+quantities' bounds come out too narrow (docs/calibration.md, HELI K = 32: at 3,000 draws this
+does not settle line 3).
 """
 from __future__ import annotations
 
