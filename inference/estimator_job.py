@@ -25,7 +25,7 @@ from .amortized.target import LabelFree
 from .amortized.train import TrainConfig, device_of, fit, posterior_loss, ratio_loss
 from .diagnostics.routes import headline
 from .diagnostics.routes import run as run_sbc
-from .temperature import amortized_draw
+from .temperature import amortized_draw, fit_temperature
 
 SBC_MEASUREMENTS = 5
 NEAR_WIDTH = 4.0
@@ -136,8 +136,6 @@ def choose_temperature(est: AmortizedEstimator, n: int, *, seed, workers: int = 
                        log=print) -> dict:
     """Choose ``est``'s temperature on n fresh prior drones (:func:`.temperature.fit_temperature`)
     and state it in the file's meta (``temperature``, ``temperature_fit``); returns the fit."""
-    from .temperature import fit_temperature
-
     vectors, profiles = sbc_data(est.spec, n, seed, workers)
     log(f"  choosing the amortized posterior's temperature on {n} fresh drones")
     fit = fit_temperature(est, est.label_free.quantities(vectors), profiles, seed=seed, progress=progress, log=log)
