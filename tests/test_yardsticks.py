@@ -227,6 +227,70 @@ def test_the_fisher_information_holds_the_widening_at_its_value_and_counts_no_sl
     assert model.fisher(u0, 5) == pytest.approx(expected, rel=1e-6)
 
 
+def test_likelihood_gaps_hold_the_covariance_at_the_plug_in_point_as_the_smc_route_does():
+    """A linear emulator (mean A u) whose covariance grows with |u|: with the covariance held
+    at a plug-in point p, twice the gap is the closed form r' C^-1 r - min_v (A v - z)' C^-1
+    (A v - z), r = A u - z, C = W(p) / n; free in u it is not (the log-determinant moves)."""
+    from types import SimpleNamespace
+
+    from mdaug.inference.emulator.model import SummaryModel
+    from mdaug.inference.emulator.train import likelihood_gaps
+
+    rng = np.random.default_rng(8)
+    a = rng.normal(size=(6, 2))
+    w0 = np.diag([0.5, 1.0, 2.0, 1.5, 0.8, 1.2])
+
+    def nets(u, covariance=True):
+        u = np.atleast_2d(u)
+        grow = 1.0 + (u * u).sum(1)
+        return u @ a.T, w0[None] * grow[:, None, None], np.zeros((len(u), 2))
+
+    model = SummaryModel.__new__(SummaryModel)
+    model.label_free, model.inflation, model.widening, model.nets = SimpleNamespace(dim=2), 1.0, None, nets
+    ut, p = np.array([0.4, -0.3]), np.array([0.1, 0.2])
+    z = ut @ a.T + rng.normal(size=6) * 0.3
+    c_inv = np.linalg.inv(w0 * (1.0 + p @ p) / 5)
+    v = np.linalg.solve(a.T @ c_inv @ a, a.T @ c_inv @ z)
+    r, rv = ut @ a.T - z, v @ a.T - z
+    expected = r @ c_inv @ r - rv @ c_inv @ rv
+    held = likelihood_gaps(model, ut[None], z[None], 5, max_eval=2000, plug_in=p[None])[0]
+    assert held == pytest.approx(expected, rel=1e-4, abs=1e-6)
+    free = likelihood_gaps(model, ut[None], z[None], 5, max_eval=2000)[0]
+    assert abs(free - expected) > 0.05
+
+
+def test_a_right_likelihoods_gap_counts_the_directions_the_data_identify():
+    """reference_gaps on a linear Gaussian emulator of 3 quantities: twice the gap of
+    summaries drawn from the model itself is chi-square(3) (mean 3) when the data identify
+    all three, chi-square(2) when one quantity moves nothing (its likelihood flat), not
+    chi-square(d); fit_widening against it finds no widening where the real gaps are the
+    model's own, and w = 4 where they are 4 times larger."""
+    from types import SimpleNamespace
+
+    from mdaug.inference.emulator.model import SummaryModel
+    from mdaug.inference.emulator.train import fit_widening, reference_gaps
+
+    rng = np.random.default_rng(9)
+    means = {}
+    for flat in (False, True):
+        a = rng.normal(size=(6, 3))
+        if flat:
+            a[:, 2] = 0.0
+        model = SummaryModel.__new__(SummaryModel)
+        model.label_free, model.inflation, model.widening = SimpleNamespace(dim=3), 1.0, None
+        model.nets = lambda u, covariance=True, a=a: (np.atleast_2d(u) @ a.T, np.repeat(np.eye(6)[None], len(
+            np.atleast_2d(u)), 0), np.zeros((len(np.atleast_2d(u)), 2)))
+        u = np.zeros((60, 3))
+        means[flat] = reference_gaps(model, u, u, 5, draws=4, seed=1, max_eval=400)
+    assert np.mean(means[False]) == pytest.approx(3.0, rel=0.15)
+    assert np.mean(means[True]) == pytest.approx(2.0, rel=0.15)
+    k = np.full(400, 2.0)
+    u = rng.normal(size=(400, 3))
+    for true_w in (1.0, 4.0):
+        w = fit_widening(u, true_w * rng.chisquare(k), k, quadratic=False)
+        assert np.exp(w["intercept"]) == pytest.approx(true_w, rel=0.15)
+
+
 def test_refit_widening_raises_the_files_own_fit_without_simulating(tmp_path, capsys):
     """tests/benchmarks/refit_widening.py with no drones: the shipped HELI K = 32 fit (its stated
     power 3 divided out) raised to 1.5 halves every coefficient of log w, the stale route table
@@ -266,6 +330,38 @@ def test_refit_widening_raises_the_files_own_fit_without_simulating(tmp_path, ca
     err = capsys.readouterr().err
     assert exc.value.code == 2 and "heli-k4.zip" in err and "summary likelihood" in err
     assert not (tmp_path / "k4.zip").exists()
+
+
+def test_refit_widening_fits_kept_gaps_against_each_drones_own_reference(tmp_path):
+    """refit_widening.py --gaps-in: gaps three times what a right likelihood shows at each drone
+    (chi-square of each drone's own reference degrees), fitted against the plug-in points, give
+    w = 3 wherever the plug-in point is; the file states how it was fitted. Fitted against
+    chi-square(35) instead, the same gaps (median about 3 x 10) look right: w stays near 1."""
+    import importlib.util
+    from pathlib import Path
+
+    from mdaug.inference.amortized.estimator import AmortizedEstimator
+
+    path = Path(__file__).parent / "benchmarks" / "refit_widening.py"
+    spec = importlib.util.spec_from_file_location("refit_widening", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    rng = np.random.default_rng(3)
+    n, d = 400, 35
+    ref = rng.uniform(8.0, 14.0, n)
+    kept = {"groups": np.array(["prior"]), "prior/gaps": 3.0 * rng.chisquare(ref), "prior/converged": np.ones(n, bool),
+            "prior/truth": rng.normal(size=(n, d)), "prior/plug_in": rng.normal(size=(n, d)), "prior/reference": ref}
+    np.savez(tmp_path / "gaps.npz", **kept)
+    common = ["--class", "QUAD", "--ramps", "32", "--gaps-in", str(tmp_path / "gaps.npz"), "--linear"]
+    assert bench.main([*common, "--reference", "own", "--against", "plug-in", "--out", str(tmp_path / "own.zip")]) == 0
+    est = AmortizedEstimator.load(tmp_path / "own.zip")
+    w = est.summary.widen(rng.normal(size=(200, d)))
+    assert np.median(w) == pytest.approx(3.0, rel=0.15)
+    record = est.meta["summary"]["training"]["widening_refit"]
+    assert record["reference"] == "own" and record["against"] == "plug-in" and record["quadratic"] is False
+    assert bench.main([*common, "--out", str(tmp_path / "chi2.zip")]) == 0
+    w35 = AmortizedEstimator.load(tmp_path / "chi2.zip").summary.widen(rng.normal(size=(200, d)))
+    assert np.median(w35) < 1.3
 
 
 def test_summary_information_takes_the_derivatives_noise_off_the_bound():
