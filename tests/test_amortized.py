@@ -111,6 +111,32 @@ def test_quantities_outside_the_prior_are_flagged():
     assert ok.tolist() == [True, False]
 
 
+def test_the_prior_density_keeps_only_labellings_whose_lowest_roll_engine_may_be_the_reference():
+    """The line density under the prior's cut (engines re-referenced to the one of lowest
+    w_a, whose Gamma ratios to the others must stay in range) against a brute-force sum
+    over every combination of the engines' labellings: c(l_0) ... c(l_3) where the engine
+    of the lowest w_a is an allowed reference. With every engine allowed it is the plain
+    product of the engines' sums; with none it is 0."""
+    import itertools
+
+    rng = np.random.default_rng(4)
+    n, e, m = 5, 3, 4
+    weights = rng.uniform(size=(n, e, m)) * (rng.uniform(size=(n, e, m)) < 0.7)
+    roll = rng.uniform(1.0, 10.0, size=(n, e, m))
+    refs = rng.uniform(size=(n, e)) < 0.6
+    got = LabelFree._lines_given_cut(weights, roll, refs)
+    for i in range(n):
+        want = 0.0
+        for combo in itertools.product(range(m), repeat=e):
+            rolls = [roll[i, k, combo[k]] for k in range(e)]
+            if refs[i, int(np.argmin(rolls))]:
+                want += np.prod([weights[i, k, combo[k]] for k in range(e)])
+        assert got[i] == pytest.approx(want, rel=1e-12, abs=1e-300)
+    every = LabelFree._lines_given_cut(weights, roll, np.ones((n, e), bool))
+    np.testing.assert_allclose(every, weights.sum(axis=2).prod(axis=1), rtol=1e-12)
+    assert np.all(LabelFree._lines_given_cut(weights, roll, np.zeros((n, e), bool)) == 0)
+
+
 def test_gamma_ratios_no_engine_could_reference_are_flagged():
     """QUAD: Gamma ratios spread wider than the prior allows around any engine are outside
     the support: flagged by vectors (not rendered at Gamma ~ 1e51) and -inf in the density."""
