@@ -182,7 +182,15 @@ def main(argv=None) -> int:
     init = (str(path), a.particles, a.time_budget)
     if a.gaps_in:
         with np.load(a.gaps_in, allow_pickle=False) as f:
+            need = ["groups"] + [f"{g}/{k}" for g in (f["groups"] if "groups" in f else [])
+                                 for k in ("gaps", "converged", "truth", "plug_in")]
+            missing = [k for k in need if k not in f]
+            if missing:
+                ap.error(f"{a.gaps_in}: field '{missing[0]}' missing (expected an .npz written by --gaps-out)")
             for name in [str(k) for k in f["groups"]]:
+                if a.against == "plug-in" and not np.all(np.isfinite(f[f"{name}/plug_in"])):
+                    ap.error(f"{a.gaps_in}: field '{name}/plug_in' is not finite (gaps found with --maximum bobyqa "
+                             "have no plug-in point); fit --against truth")
                 gaps[name], conv[name] = f[f"{name}/gaps"], f[f"{name}/converged"]
                 points[name] = {"truth": f[f"{name}/truth"], "plug-in": f[f"{name}/plug_in"]}
                 if f"{name}/reference" in f:
