@@ -107,6 +107,39 @@ class LabelFree:
                 j += 1
         return u
 
+    def log_jacobian(self, u: np.ndarray) -> np.ndarray:
+        """log |det dq/du| (n,) of :meth:`from_unbounded` at u (n, d): per engine the
+        line coordinates (the cumulated exp is triangular with diagonal exp u), the
+        amplitudes' logistic slopes A_max s (1 - s) and the lnG steps (exp u)."""
+        u = np.clip(np.atleast_2d(np.asarray(u, float)), -50, 50)
+        out = np.zeros(len(u))
+        j = 0
+        for k in range(self.E):
+            v = u[:, j + 4: j + 8]
+            out += u[:, j: j + 4].sum(1) + (np.log(self.a_max) - np.logaddexp(0, -v) - np.logaddexp(0, v)).sum(1)
+            j += 8
+            if k:
+                out += u[:, j]
+                j += 1
+        return out
+
+    def ordered(self, q: np.ndarray) -> np.ndarray:
+        """(n,) True where q (n, d) is a point of the label-free space: each engine's
+        lines positive and increasing, amplitudes in (0, A_max), lnG below 0 and
+        decreasing engine by engine (the image of :meth:`from_unbounded`)."""
+        q = np.atleast_2d(np.asarray(q, float))
+        ok = np.all(np.isfinite(q), axis=1)
+        j, prev = 0, np.zeros(len(q))
+        for k in range(self.E):
+            w, a = q[:, j: j + 4], q[:, j + 4: j + 8]
+            ok &= (w[:, 0] > 0) & np.all(np.diff(w, axis=1) > 0, axis=1) & np.all((a > 0) & (a < self.a_max), axis=1)
+            j += 8
+            if k:
+                ok &= q[:, j] < prev
+                prev = q[:, j]
+                j += 1
+        return ok
+
     def from_unbounded(self, u: np.ndarray) -> np.ndarray:
         """u (n, dim) -> q (n, dim)."""
         u = np.atleast_2d(np.asarray(u, float))

@@ -16,7 +16,9 @@ from 0 to 1, by reweighting (the next beta keeps an ESS share of ``ess``), resam
 and differential-evolution Metropolis sweeps. q is wider than the posterior and covers
 its modes, so few stages are needed, and each mode's weight comes from the
 reweighting, not from walkers crossing between modes. Knobs: the tempering's own
-(:func:`sample_tempered`), the SMC plugin's ``max_stages`` and ``n_particles``
+(:func:`sample_tempered`, with the moves across the likelihood's golf course of
+:mod:`.redraw`: one coordinate or one quantity redrawn, one line moved, two engines
+swapped), the SMC plugin's ``max_stages`` and ``n_particles``
 (:class:`mdaug.inference.samplers.smc.SMCSettings`; 0 means max(1000, 100 x dim)) and
 the shared ``time_budget``.
 """
@@ -28,6 +30,7 @@ from ...radar.seeds import seed_sequence
 from ..samplers.base import SamplerRun
 from ..samplers.smc import sampler_run
 from ..samplers.tempering import run_smc
+from .redraw import EngineSwap, LineMove, QuantityRedraw
 
 
 def n_particles(settings, dim: int) -> int:
@@ -36,8 +39,20 @@ def n_particles(settings, dim: int) -> int:
     return n + n % 2
 
 
+MOVES = {"redraw": 0.15, "quantity_redraw": 0.15, "line_move": 0.1, "engine_swap": 0.1}
+"""The moves across the golf course at the shares measured (:func:`sample_tempered`'s
+keywords; docs/calibration.md, "where the sampler went wrong"), which the SMC plugin's
+``route_moves`` turns on for the route. Not the route's default:
+on HELI's route table (200 fresh prior drones) they left the gate where it was (outer
+share 0.106 against 0.113, one quantity's coverage 0.84 against 0.85, which the gate's
+rule reads as a fail) while the self-check on a right likelihood took 0.192 to 0.156; the
+route keeps the release before's sampler until the widening is chosen again with them."""
+
+
 def sample_tempered(post, log_q, u_start: np.ndarray, settings, seed, *, ess: float = 0.7, p_move: float = 0.9,
-                    max_sweeps: int = 20) -> SamplerRun:
+                    max_sweeps: int = 20, redraw: float = 0.0, quantity_redraw: float = 0.0,
+                    line_move: float = 0.0, engine_swap: float = 0.0,
+                    prior_u: np.ndarray | None = None) -> SamplerRun:
     """Posterior draws of ``post`` (a vectorised u (W, d) -> log prior + log likelihood,
     -inf outside the prior's support) by tempered SMC from the amortized posterior.
 
@@ -49,7 +64,15 @@ def sample_tempered(post, log_q, u_start: np.ndarray, settings, seed, *, ess: fl
     ess, p_move, max_sweeps: the tempering's knobs (:func:`run_smc`). They are lighter
     than the SMC plugin's (0.9, 0.99, 40), which start from the prior: q starts near the
     posterior, and on HELI K = 32 these took 5-17 s per calibration (all converged) where
-    the plugin's took 24-30 s for the same draws' spread."""
+    the plugin's took 24-30 s for the same draws' spread.
+    redraw, quantity_redraw, line_move, engine_swap: shares of the proposals that
+    redraw one coordinate of u uniformly on the starting draws' range (padded by a tenth
+    of it), one label-free quantity (:class:`.redraw.QuantityRedraw`), move one line
+    (:class:`.redraw.LineMove`) or exchange two engines (:class:`.redraw.EngineSwap`;
+    one-engine classes skip it); the redraws draw from kernel densities of the starting
+    draws and, half and half, of ``prior_u`` (prior draws in u, where given): the moves
+    across the likelihood's golf course (:mod:`.redraw`), all 0 by default (the route's
+    sampler); :data:`MOVES` holds the shares measured."""
     own = settings.of("smc")
     u_start = np.asarray(u_start, float)
     if len(u_start) < 4 or len(u_start) % 2:
@@ -70,9 +93,22 @@ def sample_tempered(post, log_q, u_start: np.ndarray, settings, seed, *, ess: fl
             lq[inside] = log_q(u[inside])
         return lq, np.where(inside, lp - np.where(inside, lq, 0.0), 0.0)
 
+    lo, hi = u_start.min(axis=0), u_start.max(axis=0)
+    pad = 0.1 * (hi - lo)
+    sources = [u_start] if prior_u is None else [u_start, np.asarray(prior_u, float)]
+    kernels, lf = [], getattr(post, "label_free", None)  # a target without label-free quantities: u redraws only
+    if lf is None:
+        quantity_redraw = line_move = engine_swap = 0.0
+    if quantity_redraw > 0:
+        kernels.append((quantity_redraw, QuantityRedraw(lf, sources, [1.0] * len(sources))))
+    if line_move > 0:
+        kernels.append((line_move, LineMove(lf, sources, [1.0] * len(sources))))
+    if engine_swap > 0 and lf.E > 1:
+        kernels.append((engine_swap, EngineSwap(lf)))
     res = run_smc(target, lambda k, rng: u_start, len(u_start), seed, ess_target=ess, p_move=p_move,
                   max_sweeps=max_sweeps, max_stages=own.max_stages, progress=settings.progress,
-                  time_budget=settings.time_budget)
+                  time_budget=settings.time_budget, bounds=(lo - pad, hi + pad), p_redraw=redraw,
+                  kernels=kernels)
     return sampler_run(res)
 
 
@@ -81,12 +117,25 @@ def smc_route(est, profiles: np.ndarray, settings, start_seed, seed, plug_in: np
     ``calibrate`` and the route tables run it: :func:`n_particles` amortized draws
     (seeded by ``start_seed``) start :func:`sample_tempered` (seeded by ``seed``) to
     ``est.target(profiles, plug_in)``, the covariance held at ``plug_in`` (default: the
-    starting draws' median). Returns (that target, the SamplerRun)."""
+    starting draws' median). With the SMC plugin's ``route_moves`` (off by default) the
+    moves across the golf course at the shares of :data:`MOVES`. Returns (that target,
+    the SamplerRun)."""
     start, inside = est.sample_u(profiles, n_particles(settings, est.label_free.dim), start_seed, strict=False)
     post = est.target(profiles, plug_in=np.median(start, axis=0) if plug_in is None else plug_in)
-    run = sample_tempered(post, lambda v: est.log_prob_u(v, profiles), start, settings, seed)
+    moves = settings.of("smc").route_moves
+    extra = dict(MOVES, prior_u=prior_draws_u(est, len(start), seed)) if moves else {}
+    run = sample_tempered(post, lambda v: est.log_prob_u(v, profiles), start, settings, seed, **extra)
     run.extra["start_inside_share"] = float(inside)
     return post, run
+
+
+def prior_draws_u(est, n: int, seed) -> np.ndarray:
+    """n draws (n, d) of the estimator's calibration prior in u (seeded by a child of ``seed``
+    named "prior draws"): the second source of the route's redraws."""
+    from ...radar.seeds import rng as seeded_rng
+
+    lf = est.label_free
+    return lf.to_unbounded(lf.quantities(est.spec.sample_vectors(n, seeded_rng(seed_sequence(seed, "prior draws")))))
 
 
 def log_density(u: np.ndarray, post, log_q, run: SamplerRun) -> np.ndarray:

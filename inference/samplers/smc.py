@@ -25,6 +25,9 @@ class SMCSettings(PluginSettings):
     ``polish`` particles at each discovery level; rejuvenation sweeps until a particle
     has moved with probability ``p_move`` (at most ``max_sweeps`` per stage); at most
     ``max_stages`` stages. The shared ``relabel`` share and ``time_budget`` apply too.
+    ``route_moves``: the smc route of an amortized estimator (tempering from its
+    posterior, :mod:`mdaug.inference.amortized.tempered`) adds its moves across the
+    golf course at the shares measured (``tempered.MOVES``); off by default (why: there).
     """
 
     n_particles: int = 0
@@ -35,6 +38,7 @@ class SMCSettings(PluginSettings):
     max_stages: int = 500
     jump: float = 0.1
     polish: int = 8
+    route_moves: bool = False
 
     LEGACY = {"smc_ess": "ess", "smc_redraw": "redraw", "smc_p_move": "p_move", "smc_max_sweeps": "max_sweeps",
               "smc_max_stages": "max_stages", "smc_jump": "jump", "smc_polish": "polish"}  # the old flat names
@@ -93,7 +97,8 @@ class SMCSampler:
                       ess_target=own.ess, p_move=own.p_move, max_sweeps=own.max_sweeps,
                       max_stages=own.max_stages, phase_cols=layout.phase_cols, bounds=bounds,
                       p_redraw=own.redraw, modes=modes, p_jump=own.jump,
-                      relabel=layout.random_relabel if layout.labelled else None, p_relabel=settings.relabel, backend_path=backend_path,
+                      kernels=((settings.relabel, layout.random_relabel),) if layout.labelled else (),
+                      backend_path=backend_path,
                       fp=fingerprint, progress=settings.progress, time_budget=settings.time_budget)
         return sampler_run(smc)
 

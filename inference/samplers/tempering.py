@@ -106,21 +106,25 @@ def next_beta(log_lik: np.ndarray, beta: float, target_ess: float) -> float:
 
 
 def de_sweep(theta, ll, lprior, beta, target, rng, phase_cols=(), bounds=None, p_redraw: float = 0.0,
-             mixture=None, p_jump: float = 0.0, relabel=None, p_relabel: float = 0.0):
+             mixture=None, p_jump: float = 0.0, kernels=()):
     """One sweep: the two halves of the population move in turn by Metropolis steps
     under prior x L^beta. target: theta (n, dim) -> (log prior (n,), log lik (n,)).
     Proposals: DE translations; with probability ``p_redraw`` (needs ``bounds`` =
     (lo, hi) arrays (dim,)) instead one random coordinate redrawn uniformly on
     [lo, hi] (symmetric: the uniform density does not depend on the current value),
-    which lets a particle jump straight to a distant narrow mode of that coordinate.
-    With probability ``p_jump`` (needs ``mixture``, a :class:`.toolbox.StudentMixture`)
-    instead an independence proposal from the mixture over known modes, accepted
-    with the ratio that includes q(old) / q(new). With probability ``p_relabel``
-    (needs ``relabel``: (theta (k, dim), rng) -> (theta', log |Jacobian|), a random
-    bijection whose inverse is as likely, e.g. :meth:`..space.layout.Layout.random_relabel`)
-    the proposal is that map, accepted with the Jacobian in the ratio. Every
-    particle picks its kernel independently of its state, so the sweep is a mixture
-    of valid kernels.
+    which lets a particle jump straight to a distant narrow mode of that coordinate;
+    a particle whose coordinate lies outside [lo, hi] keeps it (no redraw could
+    return it there). With probability ``p_jump`` (needs ``mixture``, a
+    :class:`.toolbox.StudentMixture`) instead an independence proposal from the
+    mixture over known modes, accepted with the ratio that includes q(old) / q(new).
+    kernels: further proposals, a sequence of (share, move), move (theta (k, dim),
+    rng) -> (theta', log correction) with log correction = log q(theta | theta') -
+    log q(theta' | theta), Jacobians included (-inf refuses), e.g. the line
+    relabelling :meth:`..space.layout.Layout.random_relabel` (a random bijection whose
+    inverse is as likely: the correction is its log |Jacobian|) or the smc route's
+    redraws (:mod:`mdaug.inference.amortized.redraw`); each takes its share of the
+    proposals after the mode jumps. Every particle picks its kernel independently of
+    its state, so the sweep is a mixture of valid kernels.
     Returns (theta, ll, lprior, acceptance share); arrays are updated copies."""
     theta, ll, lprior = theta.copy(), ll.copy(), lprior.copy()
     n, dim = theta.shape
@@ -142,19 +146,24 @@ def de_sweep(theta, ll, lprior, beta, target, rng, phase_cols=(), bounds=None, p
             diff[:, cols] = wrap_phase(diff[:, cols])
         scale = theta[other].std(axis=0) + 1e-300
         prop = theta[move] + gamma[:, None] * diff + JITTER * scale * rng.standard_normal((m, dim))
+        log_jac = np.zeros(m)
         if bounds is not None and p_redraw > 0:
             redraw = np.flatnonzero(rng.uniform(size=m) < p_redraw)
             c = rng.integers(dim, size=redraw.size)
+            old = theta[move[redraw], c]
             prop[redraw] = theta[move[redraw]]
             prop[redraw, c] = rng.uniform(bounds[0][c], bounds[1][c])
+            log_jac[redraw[(old < bounds[0][c]) | (old > bounds[1][c])]] = -np.inf
         kernel = rng.uniform(size=m)
         jump = (kernel < p_jump) if mixture is not None else np.zeros(m, bool)
         if jump.any():
             prop[jump] = mixture.sample(int(jump.sum()), rng)
-        swap = (kernel >= p_jump) & (kernel < p_jump + p_relabel) if relabel is not None else np.zeros(m, bool)
-        log_jac = np.zeros(m)
-        if swap.any():
-            prop[swap], log_jac[swap] = relabel(theta[move[swap]], rng)
+        start = p_jump
+        for share, fn in kernels:
+            pick = (kernel >= start) & (kernel < start + share)
+            start += share
+            if pick.any():
+                prop[pick], log_jac[pick] = fn(theta[move[pick]], rng)
         if cols.size:
             prop[:, cols] = wrap_phase(prop[:, cols])
         lp_new, ll_new = target(prop)
@@ -199,7 +208,7 @@ def _save_checkpoint(path: Path, fp: str, rng, **arrays) -> None:
 def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float = 0.5, p_move: float = 0.99,
             min_sweeps: int = 2, max_sweeps: int = 40, max_stages: int = 500, min_acceptance: float = 0.02,
             phase_cols=(), bounds=None, p_redraw: float = 0.0, modes=None, p_jump: float = 0.0,
-            relabel=None, p_relabel: float = 0.0, backend_path=None, fp: str = "",
+            kernels=(), backend_path=None, fp: str = "",
             progress: bool | None = False, time_budget: float | None = None) -> SMCResult:
     """Adaptive tempered SMC from the prior to the posterior (see the module docstring).
 
@@ -215,8 +224,8 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
     (:class:`.modes.ModeFinder` or any object with ``update(theta, beta, rng) ->
     evaluations``, ``mixture(beta, rng)``, ``state()`` and ``load(state)``) asked
     before every rejuvenation to look for new optima and for the mode mixture that
-    ``p_jump`` of the proposals are drawn from (see :func:`de_sweep`). relabel,
-    p_relabel: an exact-symmetry move (see :func:`de_sweep`).
+    ``p_jump`` of the proposals are drawn from (see :func:`de_sweep`). kernels:
+    further proposals with their shares (see :func:`de_sweep`), e.g. an exact-symmetry move.
     backend_path: npz checkpoint (resumable, see above). progress: a bar of beta
     (0 -> 1) on a terminal. A Ctrl-C stops after the current stage (its checkpoint
     saved) with :class:`.CalibrationInterrupted`. time_budget: seconds; checked
@@ -273,7 +282,7 @@ def run_smc(target, sample_prior, n_particles: int, seed, *, ess_target: float =
                 acc_sum, sweeps, need = 0.0, 0, min_sweeps
                 while sweeps < need and not (sweeps and out_of_time()):
                     theta, ll, lprior, a = de_sweep(theta, ll, lprior, b, target, rng, phase_cols, bounds, p_redraw,
-                                                    mixture, p_jump, relabel, p_relabel)
+                                                    mixture, p_jump, kernels)
                     n_evals += n
                     sweeps += 1
                     acc_sum += a

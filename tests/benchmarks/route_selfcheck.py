@@ -2,7 +2,8 @@
 
 python tests/benchmarks/route_selfcheck.py --class QUAD --ramps 32 [--from-file FILE] [--truths 60] \
     [--seed 502] [--particles 1000] [--covariance reference|plug-in] [--ess 0.7] [--p-move 0.9] \
-    [--max-sweeps 20] [--workers 2]
+    [--max-sweeps 20] [--moves] [--redraw R] [--quantity-redraw R] [--line-move R] \
+    [--engine-swap R] [--workers 2]
 
 The route table's SBC mixes two faults: the emulated likelihood's error and the sampler's. This
 takes the first away. For each fresh prior drone (5 measurements, as the route table draws them)
@@ -39,7 +40,7 @@ def _one(args):
     import torch
 
     from mdaug.inference.amortized.estimator import AmortizedEstimator
-    from mdaug.inference.amortized.tempered import n_particles, sample_tempered
+    from mdaug.inference.amortized.tempered import n_particles, prior_draws_u, sample_tempered
     from mdaug.inference.settings import CalibrationSettings
 
     path, truth_q, y, seed, a = args
@@ -57,7 +58,8 @@ def _one(args):
     tu = lf.to_unbounded(truth_q[None])
     post.z = est.summary.mean(tu)[0] + post._chol @ np.random.default_rng(seed + 7).normal(size=len(post.z))
     run = sample_tempered(post, lambda v: est.log_prob_u(v, y), start, st, seed, ess=a["ess"], p_move=a["p_move"],
-                          max_sweeps=a["max_sweeps"])
+                          max_sweeps=a["max_sweeps"], redraw=a["redraw"], quantity_redraw=a["quantity_redraw"],
+                          line_move=a["line_move"], engine_swap=a["engine_swap"], prior_u=prior_draws_u(est, len(start), seed))
     dr = run.draws()
     q = lf.from_unbounded(dr[np.random.default_rng(seed).choice(len(dr), 199)])
     return (np.sum(q < truth_q, 0), np.quantile(q, 0.05, 0), np.quantile(q, 0.95, 0), bool(run.converged),
@@ -71,6 +73,7 @@ def main(argv=None) -> int:
 
     from mdaug.inference.amortized.estimator import AmortizedEstimator, EstimatorError
     from mdaug.inference.amortized.shipped import shipped_path
+    from mdaug.inference.amortized.tempered import MOVES
     from mdaug.inference.estimator_job import sbc_data
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -84,9 +87,20 @@ def main(argv=None) -> int:
     ap.add_argument("--ess", type=float, default=0.7, help="the tempering's ESS share per stage (the route's: 0.7)")
     ap.add_argument("--p-move", type=float, default=0.9, help="the route's: 0.9")
     ap.add_argument("--max-sweeps", type=int, default=20, help="the route's: 20")
+    ap.add_argument("--moves", action="store_true",
+                    help=f"the moves across the golf course at the shares measured ({MOVES}); "
+                         "the four options below set them one by one")
+    ap.add_argument("--redraw", type=float, default=None, help="share of u-coordinate redraws (the route's: 0)")
+    ap.add_argument("--quantity-redraw", type=float, default=None, help="share of quantity redraws (the route's: 0)")
+    ap.add_argument("--line-move", type=float, default=None, help="share of line moves (the route's: 0)")
+    ap.add_argument("--engine-swap", type=float, default=None,
+                    help="share of engine swaps, several engines only (the route's: 0)")
     ap.add_argument("--time-budget", type=float, default=180.0)
     ap.add_argument("--workers", type=int, default=2)
     a = ap.parse_args(argv)
+    for k, v in MOVES.items():
+        if getattr(a, k) is None:
+            setattr(a, k, v if a.moves else 0.0)
     t0 = time.perf_counter()
     path = str(a.from_file or shipped_path(a.cls, a.ramps))
     est = AmortizedEstimator.load(path)
@@ -96,7 +110,8 @@ def main(argv=None) -> int:
         ap.error(str(exc))
     vec, prof = sbc_data(est.spec, a.truths, a.seed, a.workers)
     tq = est.label_free.quantities(vec)
-    knobs = {k: getattr(a, k) for k in ("particles", "covariance", "ess", "p_move", "max_sweeps", "time_budget")}
+    knobs = {k: getattr(a, k) for k in ("particles", "covariance", "ess", "p_move", "max_sweeps", "time_budget", "redraw",
+                                        "quantity_redraw", "line_move", "engine_swap")}
     jobs = [(path, tq[i], prof[i], a.seed * 1000 + i, knobs) for i in range(a.truths)]
     with ProcessPoolExecutor(a.workers) as pool:
         res = list(pool.map(_one, jobs, chunksize=2))
@@ -107,11 +122,14 @@ def main(argv=None) -> int:
     outer = float(((ranks < 10) | (ranks > 189)).mean())
     print(f"{os.path.basename(path)}: the smc route on summaries drawn from its own likelihood (covariance held at "
           f"the {a.covariance} point), {a.truths} prior drones, seed {a.seed}, {a.particles} particles, ess "
-          f"{a.ess:g}, p_move {a.p_move:g}, at most {a.max_sweeps} sweeps a stage")
+          f"{a.ess:g}, p_move {a.p_move:g}, at most {a.max_sweeps} sweeps a stage, redraws {a.redraw:g} (u) "
+          f"{a.quantity_redraw:g} (quantity), line moves {a.line_move:g}, engine swaps {a.engine_swap:g}")
     print(f"outer-10% share {outer:.3f} (an exact sampler: about 0.10), 90% coverage {cover.min():.2f}-"
           f"{cover.max():.2f}, lines 1-4 90% width / truth {' '.join(f'{w:.2f}' for w in width[:4])}, converged "
           f"{np.mean([r[3] for r in res]):.2f}, {np.median([r[4] for r in res]):.1f} s / drone "
           f"({time.perf_counter() - t0:.0f} s)")
+    low = np.argsort(cover)[:5]
+    print("lowest 90% coverage: " + ", ".join(f"{est.label_free.names[c]} {cover[c]:.2f}" for c in low))
     return 0
 
 
