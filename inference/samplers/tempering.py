@@ -147,23 +147,26 @@ def de_sweep(theta, ll, lprior, beta, target, rng, phase_cols=(), bounds=None, p
         scale = theta[other].std(axis=0) + 1e-300
         prop = theta[move] + gamma[:, None] * diff + JITTER * scale * rng.standard_normal((m, dim))
         log_jac = np.zeros(m)
+        outside = np.zeros(m, bool)  # redraws of a coordinate that lies outside its box: refused
         if bounds is not None and p_redraw > 0:
             redraw = np.flatnonzero(rng.uniform(size=m) < p_redraw)
             c = rng.integers(dim, size=redraw.size)
             old = theta[move[redraw], c]
             prop[redraw] = theta[move[redraw]]
             prop[redraw, c] = rng.uniform(bounds[0][c], bounds[1][c])
-            log_jac[redraw[(old < bounds[0][c]) | (old > bounds[1][c])]] = -np.inf
+            outside[redraw[(old < bounds[0][c]) | (old > bounds[1][c])]] = True
         kernel = rng.uniform(size=m)
         jump = (kernel < p_jump) if mixture is not None else np.zeros(m, bool)
         if jump.any():
             prop[jump] = mixture.sample(int(jump.sum()), rng)
-        start = p_jump
+        taken, start = jump.copy(), p_jump  # a jump or a kernel replaces the redraw drawn for its particle
         for share, fn in kernels:
             pick = (kernel >= start) & (kernel < start + share)
             start += share
+            taken |= pick
             if pick.any():
                 prop[pick], log_jac[pick] = fn(theta[move[pick]], rng)
+        log_jac[outside & ~taken] = -np.inf
         if cols.size:
             prop[:, cols] = wrap_phase(prop[:, cols])
         lp_new, ll_new = target(prop)
