@@ -1,4 +1,7 @@
-"""One label-free quantity redrawn at a time: the smc route's move across a golf course.
+"""The smc route's moves across the likelihood's golf course: one label-free quantity
+redrawn (:class:`QuantityRedraw`), one line moved (:class:`LineMove`), two engines
+swapped (:class:`EngineSwap`). Off in the route by default (the SMC plugin's
+``route_moves``; :mod:`.tempered` says why).
 
 Why: the summary likelihood is a golf course in each line frequency (a line pays off only
 within about a bin of its place, and a sideband at |w_i +- w_j| fits nearly as well as the
@@ -10,8 +13,9 @@ log posterior stood 0.4-26 nats above every particle's: the differential-evoluti
 moves slide within a hole and do not jump to another. Redrawing one quantity, the rest
 held, puts a line at a distant place in one step.
 
-:class:`QuantityRedraw` is a Metropolis-Hastings proposal (the ``kernel`` of
-:func:`mdaug.inference.samplers.tempering.de_sweep`): each particle picks one
+Each move is a Metropolis-Hastings proposal (a ``kernel`` of
+:func:`mdaug.inference.samplers.tempering.de_sweep`) that returns its log correction.
+:class:`QuantityRedraw`: each particle picks one
 quantity q_c of the label-free q (a sorted line frequency, a line amplitude or a Gamma
 ratio) and draws it afresh from a fixed one-dimensional density g_c, the others held.
 In q the move is an independence proposal along q_c; a particle's state is u, so the
