@@ -46,6 +46,14 @@ def _rows(u, d: int, who: str) -> np.ndarray:
     return u[np.unique(np.linspace(0, len(u) - 1, min(len(u), MAX_POINTS)).astype(int))]
 
 
+def _shares(weights, sources, who: str) -> np.ndarray:
+    """The sources' mixing weights, normalised: one non-negative weight per source, not all 0."""
+    w = np.asarray(weights, float)
+    if len(sources) != len(w) or not len(w) or np.any(w < 0) or w.sum() <= 0:
+        raise ValueError(f"{who}: one non-negative weight per source, not all 0")
+    return w / w.sum()
+
+
 def _to_line(kind: str, q: np.ndarray, a_max: float) -> np.ndarray:
     """The 1-D coordinate the kernel density lives on: log w, logit(A / A_max), lnG."""
     if kind == "w":
@@ -100,10 +108,7 @@ class QuantityRedraw:
         self.kinds = label_free.kinds
         d = label_free.dim
         self.columns = np.arange(d) if columns is None else np.asarray(columns, int)
-        w = np.asarray(weights, float)
-        if len(sources) != len(w) or not len(w) or np.any(w < 0) or w.sum() <= 0:
-            raise ValueError("QuantityRedraw: one non-negative weight per source, not all 0")
-        self.weights = w / w.sum()
+        self.weights = _shares(weights, sources, "QuantityRedraw")
         self.points, self.bandwidth = [], []
         for u in sources:
             q = label_free.from_unbounded(_rows(u, d, "QuantityRedraw"))
@@ -166,26 +171,19 @@ class LineMove:
 
     def __init__(self, label_free: LabelFree, sources, weights):
         self.lf = label_free
-        w = np.asarray(weights, float)
-        if len(sources) != len(w) or not len(w) or np.any(w < 0) or w.sum() <= 0:
-            raise ValueError("LineMove: one non-negative weight per source, not all 0")
-        self.weights = w / w.sum()
+        self.weights = _shares(weights, sources, "LineMove")
         self.points, self.bandwidth = [], []  # per source: (E, n * 4, 2) points, (E, 2) bandwidths
         for u in sources:
             q = label_free.from_unbounded(_rows(u, label_free.dim, "LineMove"))
             pts, bws = [], []
             for k in range(label_free.E):
-                j = self._start(k)
+                j = self.lf.engine_start(k)
                 t = np.column_stack([_to_line("w", q[:, j: j + 4].ravel(), label_free.a_max),
                                      _to_line("A", q[:, j + 4: j + 8].ravel(), label_free.a_max)])
                 pts.append(t)
                 bws.append(0.9 * t.std(axis=0) * len(t) ** (-1 / 6) + 1e-9)  # Scott-like for 2-D
             self.points.append(pts)
             self.bandwidth.append(bws)
-
-    def _start(self, k: int) -> int:
-        """Column of engine k's first line in q (engine k >= 1 follows engine k - 1's lnG)."""
-        return 8 * k + max(k - 1, 0)
 
     def log_density(self, k: int, t: np.ndarray) -> np.ndarray:
         """log g (n,) of engine k's line density at t (n, 2) = (log w, logit A)."""
@@ -217,7 +215,7 @@ class LineMove:
             i = np.flatnonzero(eng == k)
             if not i.size:
                 continue
-            j = self._start(k)
+            j = self.lf.engine_start(k)
             w_old, a_old = q[i, j + slot[i]], q[i, j + 4 + slot[i]]
             w_new, a_new = _from_line("w", t_new[i, 0], a_max), _from_line("A", t_new[i, 1], a_max)
             old_t = np.column_stack([_to_line("w", w_old, a_max), _to_line("A", a_old, a_max)])
@@ -244,7 +242,7 @@ class EngineSwap:
         if label_free.E < 2:
             raise ValueError("EngineSwap needs two engines or more")
         self.pairs = np.array([(i, j) for i in range(label_free.E) for j in range(i + 1, label_free.E)])
-        self.blocks = np.array([np.arange(8) + 8 * k + max(k - 1, 0) for k in range(label_free.E)])
+        self.blocks = np.array([np.arange(8) + label_free.engine_start(k) for k in range(label_free.E)])
 
     def __call__(self, u: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray]:
         """Proposals u' (n, d) and log corrections (n,) (zeros)."""

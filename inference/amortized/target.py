@@ -63,7 +63,12 @@ class LabelFree:
     @property
     def gamma_columns(self) -> list[int]:
         """Columns of q (and u) holding lnG[1..E-1], the ratios to the brightest engine."""
-        return [9 * e + 7 for e in range(1, self.E)]
+        return [self.engine_start(e) + 8 for e in range(1, self.E)]
+
+    def engine_start(self, k: int) -> int:
+        """Column of engine k's first line in q (and u): engine k >= 1 follows engine k - 1's
+        lnG; its four lines, then their four amplitudes."""
+        return 8 * k + max(k - 1, 0)
 
     @property
     def kinds(self) -> list[str]:

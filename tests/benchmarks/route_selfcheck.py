@@ -59,7 +59,8 @@ def _one(args):
     post.z = est.summary.mean(tu)[0] + post._chol @ np.random.default_rng(seed + 7).normal(size=len(post.z))
     run = sample_tempered(post, lambda v: est.log_prob_u(v, y), start, st, seed, ess=a["ess"], p_move=a["p_move"],
                           max_sweeps=a["max_sweeps"], redraw=a["redraw"], quantity_redraw=a["quantity_redraw"],
-                          line_move=a["line_move"], engine_swap=a["engine_swap"], prior_u=prior_draws_u(est, len(start), seed))
+                          line_move=a["line_move"], engine_swap=a["engine_swap"],
+                          prior_u=prior_draws_u(est, len(start), seed) if a["quantity_redraw"] or a["line_move"] else None)
     dr = run.draws()
     q = lf.from_unbounded(dr[np.random.default_rng(seed).choice(len(dr), 199)])
     return (np.sum(q < truth_q, 0), np.quantile(q, 0.05, 0), np.quantile(q, 0.95, 0), bool(run.converged),
