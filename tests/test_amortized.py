@@ -742,6 +742,15 @@ def test_tempered_smc_from_a_wide_proposal_weighs_distant_modes_right():
     assert d[right].std(0) == pytest.approx([0.5, 0.5], rel=0.15)
     with pytest.raises(ValueError, match="even number"):
         sample_tempered(Bimodal(), q.logpdf, start[:5], CalibrationSettings(progress=False), 3)
+    # the route's tempering knobs come from the SMC plugin: slower tempering takes more stages,
+    # and no stage sweeps more than route_max_sweeps
+    slow = CalibrationSettings(progress=False).with_plugin("smc", route_ess=0.95, route_p_move=0.99,
+                                                           route_max_sweeps=3)
+    run_slow = sample_tempered(Bimodal(), q.logpdf, start, slow, 3)
+    assert run_slow.converged and len(run_slow.extra["smc_betas"]) > len(run.extra["smc_betas"])
+    assert max(run_slow.extra["smc_sweeps"]) == 3
+    with pytest.raises(ValueError, match="route_ess"):
+        CalibrationSettings().with_plugin("smc", route_ess=1.0)
 
 
 def test_the_smc_routes_density_is_the_normalised_posterior_from_its_own_evidence():

@@ -21,6 +21,15 @@ reweighting, not from walkers crossing between modes. Knobs: the tempering's own
 swapped), the SMC plugin's ``max_stages`` and ``n_particles``
 (:class:`mdaug.inference.samplers.smc.SMCSettings`; 0 means max(1000, 100 x dim)) and
 the shared ``time_budget``.
+
+How fast to temper (the plugin's ``route_ess``, ``route_p_move``, ``route_max_sweeps``):
+HELI's 8 quantities are sampled well at 0.7, 0.9, 20. QUAD's 35 are not: each stage's few
+differential-evolution sweeps leave the resampled cloud tight and off-centre (on 12 of
+the self-check's drones, with the moves: outer-10% share 0.257 where an exact sampler
+gives 0.10, and no truth in a hole the particles missed). Slower tempering with longer
+rejuvenation, :data:`~mdaug.inference.samplers.smc.THOROUGH_ROUTE` (0.9, 0.99, 60),
+took the same drones to 0.114 at 151 s a drone; either half alone to 0.195-0.276
+(docs/calibration.md, "QUAD's sampler").
 """
 from __future__ import annotations
 
@@ -49,8 +58,7 @@ rule reads as a fail) while the self-check on a right likelihood took 0.192 to 0
 route keeps the release before's sampler until the widening is chosen again with them."""
 
 
-def sample_tempered(post, log_q, u_start: np.ndarray, settings, seed, *, ess: float = 0.7, p_move: float = 0.9,
-                    max_sweeps: int = 20, redraw: float = 0.0, quantity_redraw: float = 0.0,
+def sample_tempered(post, log_q, u_start: np.ndarray, settings, seed, *, redraw: float = 0.0, quantity_redraw: float = 0.0,
                     line_move: float = 0.0, engine_swap: float = 0.0,
                     prior_u: np.ndarray | None = None) -> SamplerRun:
     """Posterior draws of ``post`` (a vectorised u (W, d) -> log prior + log likelihood,
@@ -61,10 +69,12 @@ def sample_tempered(post, log_q, u_start: np.ndarray, settings, seed, *, ess: fl
     replaced by copies of those inside, drawn at random); settings:
     :class:`~mdaug.inference.settings.CalibrationSettings`. Returns a SamplerRun whose
     one stored step holds the N final particles (tau = N / the last reweighting's ESS).
-    ess, p_move, max_sweeps: the tempering's knobs (:func:`run_smc`). They are lighter
-    than the SMC plugin's (0.9, 0.99, 40), which start from the prior: q starts near the
+    The tempering's knobs (:func:`run_smc`'s ess, p_move, max_sweeps) are the SMC plugin's
+    ``route_ess``, ``route_p_move``, ``route_max_sweeps``: by default 0.7, 0.9, 20, lighter
+    than the plugin's own (0.9, 0.99, 40), which start from the prior: q starts near the
     posterior, and on HELI K = 32 these took 5-17 s per calibration (all converged) where
-    the plugin's took 24-30 s for the same draws' spread.
+    the plugin's took 24-30 s for the same draws' spread. QUAD needs more
+    (:data:`~mdaug.inference.samplers.smc.THOROUGH_ROUTE`, the module doc).
     redraw, quantity_redraw, line_move, engine_swap: shares of the proposals that
     redraw one coordinate of u uniformly on the starting draws' range (padded by a tenth
     of it), one label-free quantity (:class:`.redraw.QuantityRedraw`), move one line
@@ -105,8 +115,8 @@ def sample_tempered(post, log_q, u_start: np.ndarray, settings, seed, *, ess: fl
         kernels.append((line_move, LineMove(lf, sources, [1.0] * len(sources))))
     if engine_swap > 0 and lf.E > 1:
         kernels.append((engine_swap, EngineSwap(lf)))
-    res = run_smc(target, lambda k, rng: u_start, len(u_start), seed, ess_target=ess, p_move=p_move,
-                  max_sweeps=max_sweeps, max_stages=own.max_stages, progress=settings.progress,
+    res = run_smc(target, lambda k, rng: u_start, len(u_start), seed, ess_target=own.route_ess,
+                  p_move=own.route_p_move, max_sweeps=own.route_max_sweeps, max_stages=own.max_stages, progress=settings.progress,
                   time_budget=settings.time_budget, bounds=(lo - pad, hi + pad), p_redraw=redraw,
                   kernels=kernels)
     return sampler_run(res)

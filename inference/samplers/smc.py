@@ -28,6 +28,11 @@ class SMCSettings(PluginSettings):
     ``route_moves``: the smc route of an amortized estimator (tempering from its
     posterior, :mod:`mdaug.inference.amortized.tempered`) adds its moves across the
     golf course at the shares measured (``tempered.MOVES``); off by default (why: there).
+    ``route_ess``, ``route_p_move``, ``route_max_sweeps``: that route's tempering, lighter
+    than the plugin's own (it starts from the amortized posterior, near the target):
+    0.7, 0.9, 20 by default; :data:`THOROUGH_ROUTE` is slower tempering with longer
+    rejuvenation (the sampler QUAD's 35 quantities need: ``tempered`` says what it
+    measured).
     """
 
     n_particles: int = 0
@@ -39,6 +44,9 @@ class SMCSettings(PluginSettings):
     jump: float = 0.1
     polish: int = 8
     route_moves: bool = False
+    route_ess: float = 0.7
+    route_p_move: float = 0.9
+    route_max_sweeps: int = 20
 
     LEGACY = {"smc_ess": "ess", "smc_redraw": "redraw", "smc_p_move": "p_move", "smc_max_sweeps": "max_sweeps",
               "smc_max_stages": "max_stages", "smc_jump": "jump", "smc_polish": "polish"}  # the old flat names
@@ -50,6 +58,9 @@ class SMCSettings(PluginSettings):
         if not (0 < self.ess < 1 and 0 < self.p_move < 1 and 0 <= self.redraw < 1):
             raise ValueError(f"smc_ess and smc_p_move must be in (0, 1) and smc_redraw in [0, 1), got "
                              f"{self.ess}, {self.p_move}, {self.redraw}")
+        if not (0 < self.route_ess < 1 and 0 < self.route_p_move < 1 and self.route_max_sweeps >= 2):
+            raise ValueError(f"route_ess and route_p_move must be in (0, 1) and route_max_sweeps >= 2, got "
+                             f"{self.route_ess}, {self.route_p_move}, {self.route_max_sweeps}")
         if self.n_particles < 0 or self.n_particles == 1 or self.max_sweeps < 2 or self.max_stages < 1:
             raise ValueError("CalibrationSettings: n_particles must be 0 (auto) or >= 2, smc_max_sweeps >= 2 "
                              "and smc_max_stages >= 1")
@@ -59,6 +70,12 @@ class SMCSettings(PluginSettings):
         """For tests and ``--quick``: 3 particles polished per mode search."""
         return cls(polish=3)
 
+
+THOROUGH_ROUTE = {"route_moves": True, "route_ess": 0.9, "route_p_move": 0.99, "route_max_sweeps": 60,
+                  "n_particles": 1000}
+"""The smc route's knobs (``CalibrationSettings().with_plugin("smc", **THOROUGH_ROUTE)``) at which
+QUAD's self-check came near an exact sampler's: 0.114 outer-10% share on 12 drones at 151 s a
+drone (docs/calibration.md, "QUAD's sampler")."""
 
 
 def posterior_target(post):

@@ -3,7 +3,7 @@
 python tests/benchmarks/route_selfcheck.py --class QUAD --ramps 32 [--from-file FILE] [--truths 60] \
     [--seed 502] [--particles 1000] [--covariance reference|plug-in] [--ess 0.7] [--p-move 0.9] \
     [--max-sweeps 20] [--moves] [--redraw R] [--quantity-redraw R] [--line-move R] \
-    [--engine-swap R] [--workers 2]
+    [--engine-swap R] [--thorough] [--workers 2]
 
 The route table's SBC mixes two faults: the emulated likelihood's error and the sampler's. This
 takes the first away. For each fresh prior drone (5 measurements, as the route table draws them)
@@ -49,7 +49,8 @@ def _one(args):
         _EST[path] = AmortizedEstimator.load(path)
     est = _EST[path]
     lf = est.label_free
-    st = CalibrationSettings(progress=False, time_budget=a["time_budget"], n_particles=a["particles"])
+    st = CalibrationSettings(progress=False, time_budget=a["time_budget"], n_particles=a["particles"]).with_plugin(
+        "smc", route_ess=a["ess"], route_p_move=a["p_move"], route_max_sweeps=a["max_sweeps"])
     t0 = time.perf_counter()
     start, _ = est.sample_u(y, n_particles(st, lf.dim), seed, strict=False)
     at = (lf.to_unbounded(lf.quantities(lf.reference[None]))[0] if a["covariance"] == "reference"
@@ -57,8 +58,8 @@ def _one(args):
     post = est.target(y, plug_in=at)
     tu = lf.to_unbounded(truth_q[None])
     post.z = est.summary.mean(tu)[0] + post._chol @ np.random.default_rng(seed + 7).normal(size=len(post.z))
-    run = sample_tempered(post, lambda v: est.log_prob_u(v, y), start, st, seed, ess=a["ess"], p_move=a["p_move"],
-                          max_sweeps=a["max_sweeps"], redraw=a["redraw"], quantity_redraw=a["quantity_redraw"],
+    run = sample_tempered(post, lambda v: est.log_prob_u(v, y), start, st, seed, redraw=a["redraw"],
+                          quantity_redraw=a["quantity_redraw"],
                           line_move=a["line_move"], engine_swap=a["engine_swap"],
                           prior_u=prior_draws_u(est, len(start), seed) if a["quantity_redraw"] or a["line_move"] else None)
     dr = run.draws()
@@ -75,6 +76,7 @@ def main(argv=None) -> int:
     from mdaug.inference.amortized.estimator import AmortizedEstimator, EstimatorError
     from mdaug.inference.amortized.shipped import shipped_path
     from mdaug.inference.amortized.tempered import MOVES
+    from mdaug.inference.samplers.smc import THOROUGH_ROUTE
     from mdaug.inference.estimator_job import sbc_data
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -96,9 +98,15 @@ def main(argv=None) -> int:
     ap.add_argument("--line-move", type=float, default=None, help="share of line moves (the route's: 0)")
     ap.add_argument("--engine-swap", type=float, default=None,
                     help="share of engine swaps, several engines only (the route's: 0)")
+    ap.add_argument("--thorough", action="store_true",
+                    help="the moves, --ess, --p-move, --max-sweeps and --particles of samplers.smc.THOROUGH_ROUTE")
     ap.add_argument("--time-budget", type=float, default=180.0)
     ap.add_argument("--workers", type=int, default=2)
     a = ap.parse_args(argv)
+    if a.thorough:
+        a.moves = True
+        a.ess, a.p_move, a.max_sweeps, a.particles = (THOROUGH_ROUTE[k] for k in ("route_ess", "route_p_move",
+                                                                                  "route_max_sweeps", "n_particles"))
     for k, v in MOVES.items():
         if getattr(a, k) is None:
             setattr(a, k, v if a.moves else 0.0)

@@ -2,7 +2,7 @@
 
 python tests/benchmarks/summary_likelihood.py --class HELI --ramps 32 --prior DIR --near DIR \
     [--model PREFIX | --save-model PREFIX] [--route-truths 40] [--specimens 20] [--time-budget 60] \
-    [--workers 2] [--seed 7] [--moves] --out FILE
+    [--workers 2] [--seed 7] [--moves | --thorough] --out FILE
 python tests/benchmarks/summary_likelihood.py --class HELI --ramps 32 --from-file FILE [...] --out FILE2
    (the route table of a file that already carries its summary likelihood)
 
@@ -81,6 +81,8 @@ def main(argv=None) -> int:
     ap.add_argument("--routes", default=None, help="comma-separated routes to compare (default: all the file has)")
     ap.add_argument("--moves", action="store_true", help="the smc route with its moves across the golf course "
                     "(the SMC plugin's route_moves; off by default)")
+    ap.add_argument("--thorough", action="store_true", help="the smc route with its moves, slower tempering and "
+                    "longer rejuvenation (samplers.smc.THOROUGH_ROUTE)")
     ap.add_argument("--out", required=True)
     a = ap.parse_args(argv)
     torch.set_num_threads(1)
@@ -120,7 +122,10 @@ def main(argv=None) -> int:
     report = {**report, "command": "python tests/benchmarks/summary_likelihood.py " + " ".join(sys.argv[1:])}
     est.with_summary(model, report)
     est.save(a.out)  # the routes read the file in their worker processes
-    settings = CalibrationSettings(progress=False, time_budget=a.time_budget).with_plugin("smc", route_moves=a.moves)
+    from mdaug.inference.samplers.smc import THOROUGH_ROUTE
+
+    knobs = dict(THOROUGH_ROUTE) if a.thorough else {"route_moves": a.moves}
+    settings = CalibrationSettings(progress=False, time_budget=a.time_budget).with_plugin("smc", **knobs)
     names = lf.names[:8]
     routes = tuple(a.routes.split(",")) if a.routes else None
     old = est.meta.get("sbc", {})
