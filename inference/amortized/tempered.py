@@ -58,8 +58,8 @@ rule reads as a fail) while the self-check on a right likelihood took 0.192 to 0
 route keeps the release before's sampler until the widening is chosen again with them."""
 
 
-def sample_tempered(post, log_q, u_start: np.ndarray, settings, seed, *, redraw: float = 0.0, quantity_redraw: float = 0.0,
-                    line_move: float = 0.0, engine_swap: float = 0.0,
+def sample_tempered(post, log_q, u_start: np.ndarray, settings, seed, *, redraw: float = 0.0,
+                    quantity_redraw: float = 0.0, line_move: float = 0.0, engine_swap: float = 0.0,
                     prior_u: np.ndarray | None = None) -> SamplerRun:
     """Posterior draws of ``post`` (a vectorised u (W, d) -> log prior + log likelihood,
     -inf outside the prior's support) by tempered SMC from the amortized posterior.
@@ -116,9 +116,9 @@ def sample_tempered(post, log_q, u_start: np.ndarray, settings, seed, *, redraw:
     if engine_swap > 0 and lf.E > 1:
         kernels.append((engine_swap, EngineSwap(lf)))
     res = run_smc(target, lambda k, rng: u_start, len(u_start), seed, ess_target=own.route_ess,
-                  p_move=own.route_p_move, max_sweeps=own.route_max_sweeps, max_stages=own.max_stages, progress=settings.progress,
-                  time_budget=settings.time_budget, bounds=(lo - pad, hi + pad), p_redraw=redraw,
-                  kernels=kernels)
+                  p_move=own.route_p_move, max_sweeps=own.route_max_sweeps, max_stages=own.max_stages,
+                  progress=settings.progress, time_budget=settings.time_budget, bounds=(lo - pad, hi + pad),
+                  p_redraw=redraw, kernels=kernels)
     return sampler_run(res)
 
 
