@@ -15,10 +15,9 @@ prior's support) are moved through the targets q(u)^(1 - beta) p(u | x)^beta, be
 from 0 to 1, by reweighting (the next beta keeps an ESS share of ``ess``), resampling
 and differential-evolution Metropolis sweeps. q is wider than the posterior and covers
 its modes, so few stages are needed, and each mode's weight comes from the
-reweighting, not from walkers crossing between modes. Knobs: the tempering's own
-(:func:`sample_tempered`, with the moves across the likelihood's golf course of
-:mod:`.redraw`: one coordinate or one quantity redrawn, one line moved, two engines
-swapped), the SMC plugin's ``max_stages`` and ``n_particles``
+reweighting, not from walkers crossing between modes. Knobs: the moves across the
+likelihood's golf course (:func:`sample_tempered`, :mod:`.redraw`: one coordinate or one
+quantity redrawn, one line moved, two engines swapped), the SMC plugin's ``route_*`` tempering, ``max_stages`` and ``n_particles``
 (:class:`mdaug.inference.samplers.smc.SMCSettings`; 0 means max(1000, 100 x dim)) and
 the shared ``time_budget``.
 
@@ -35,6 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...radar.seeds import rng as seeded_rng
 from ...radar.seeds import seed_sequence
 from ..samplers.base import SamplerRun
 from ..samplers.smc import sampler_run
@@ -142,8 +142,6 @@ def smc_route(est, profiles: np.ndarray, settings, start_seed, seed, plug_in: np
 def prior_draws_u(est, n: int, seed) -> np.ndarray:
     """n draws (n, d) of the estimator's calibration prior in u (seeded by a child of ``seed``
     named "prior draws"): the second source of the route's redraws."""
-    from ...radar.seeds import rng as seeded_rng
-
     lf = est.label_free
     return lf.to_unbounded(lf.quantities(est.spec.sample_vectors(n, seeded_rng(seed_sequence(seed, "prior draws")))))
 

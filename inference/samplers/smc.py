@@ -73,9 +73,9 @@ class SMCSettings(PluginSettings):
 
 THOROUGH_ROUTE = {"route_moves": True, "route_ess": 0.9, "route_p_move": 0.99, "route_max_sweeps": 60,
                   "n_particles": 1000}
-"""The smc route's knobs (``CalibrationSettings().with_plugin("smc", **THOROUGH_ROUTE)``) at which
-QUAD's self-check came near an exact sampler's: 0.114 outer-10% share on 12 drones at 151 s a
-drone (docs/calibration.md, "QUAD's sampler")."""
+"""The smc route's knobs, its particle count included (``CalibrationSettings().with_plugin("smc",
+**THOROUGH_ROUTE)``), at which QUAD's self-check came near an exact sampler's: 0.114 outer-10%
+share on 12 drones at 151 s a drone (docs/calibration.md, "QUAD's sampler")."""
 
 
 def posterior_target(post):

@@ -63,6 +63,7 @@ def main(argv=None) -> int:
     from mdaug.inference.emulator.model import from_parts, to_parts
     from mdaug.inference.emulator.train import train_summary_model
     from mdaug.inference.estimator_job import estimator_sbc, name_default_route, specimen_table
+    from mdaug.inference.samplers.smc import THOROUGH_ROUTE
     from mdaug.inference.settings import CalibrationSettings
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -79,9 +80,10 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--routes", default=None, help="comma-separated routes to compare (default: all the file has)")
-    ap.add_argument("--moves", action="store_true", help="the smc route with its moves across the golf course "
+    how = ap.add_mutually_exclusive_group()
+    how.add_argument("--moves", action="store_true", help="the smc route with its moves across the golf course "
                     "(the SMC plugin's route_moves; off by default)")
-    ap.add_argument("--thorough", action="store_true", help="the smc route with its moves, slower tempering and "
+    how.add_argument("--thorough", action="store_true", help="the smc route with its moves, slower tempering and "
                     "longer rejuvenation (samplers.smc.THOROUGH_ROUTE)")
     ap.add_argument("--out", required=True)
     a = ap.parse_args(argv)
@@ -122,8 +124,6 @@ def main(argv=None) -> int:
     report = {**report, "command": "python tests/benchmarks/summary_likelihood.py " + " ".join(sys.argv[1:])}
     est.with_summary(model, report)
     est.save(a.out)  # the routes read the file in their worker processes
-    from mdaug.inference.samplers.smc import THOROUGH_ROUTE
-
     knobs = dict(THOROUGH_ROUTE) if a.thorough else {"route_moves": a.moves}
     settings = CalibrationSettings(progress=False, time_budget=a.time_budget).with_plugin("smc", **knobs)
     names = lf.names[:8]
