@@ -125,7 +125,7 @@ def train_estimator(spec: SimulationSpec, n_simulations: int, work, out, *, seed
                                         route_truths=sbc_route_truths, route_settings=route_settings,
                                         specimens=sbc_specimens if sbc_route_truths else 0, estimator_path=out,
                                         progress=progress, log=log)
-        est.meta["default_route"] = (est.meta["sbc"].get("route_table") or {}).get("default") or "amortized"
+        adopt_route_table(est)
     est.meta["job_seconds"] = time.perf_counter() - t0
     est.save(out)
     log(f"estimator written to {out} ({time.perf_counter() - t0:.0f} s in all)")
@@ -221,7 +221,11 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
                 out[name]["likelihood"] = est.likelihood_name
                 log(f"  SBC {name} ({est.likelihood_name} likelihood): {headline(out[name])}; converged "
                     f"{out[name]['converged_share']:.2f}")
+        from .amortized.tempered import route_knobs
+        from .amortized.tempered import route_settings as resolved
+
         out["route_table"] = {"drones": int(k), "default": table["default"],
+                              "route_settings": route_knobs(resolved(settings, est), lf.dim),
                               "rows": {n: _row(r) for n, r in table["rows"].items()}}
     if specimens:  # drones like a user's: the table's routes, or the amortized route alone without a table
         s_seed = child_seed(seed, "specimens") if specimen_seed is None else specimen_seed
@@ -233,6 +237,16 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
         log(f"  route table on {k} drones: default route {out['route_table']['default']} "
             f"({out['route_table']['default_by']})")
     return out
+
+
+def adopt_route_table(est: AmortizedEstimator) -> None:
+    """The file runs as its route table judged it (in place): ``default_route`` the table's
+    default ('amortized' without a table) and ``route_settings`` the smc route's knobs the
+    table ran with (kept as they were without a table)."""
+    table = est.meta.get("sbc", {}).get("route_table") or {}
+    est.meta["default_route"] = table.get("default") or "amortized"
+    if "route_settings" in table:
+        est.meta["route_settings"] = dict(table["route_settings"])
 
 
 def name_default_route(sbc: dict) -> None:
@@ -333,6 +347,10 @@ def specimen_table(est: AmortizedEstimator, n: int, *, settings=None, seed: int 
                               progress=progress, desc=f"specimens {name}",
                               workers=workers if estimator_path is not None else 1))
     out = {"drones": int(n), "near_width": 1.0, "rows": rows}
+    if "smc" in rows:
+        from .amortized.tempered import route_knobs, route_settings
+
+        out["route_settings"] = route_knobs(route_settings(settings, est), lf.dim)
     if est.summary is not None:
         from .emulator.posterior import EmulatedPosterior
 
@@ -345,7 +363,7 @@ def specimen_table(est: AmortizedEstimator, n: int, *, settings=None, seed: int 
 def _row(summary: dict) -> dict:
     """A route table row: the gate's figures, the log score, the widths, convergence, seconds."""
     keep = ("outer_share", "coverage90_range", "tarp_atc", "log_score", "log_score_by", "log_score_gaussian",
-            "width_over_truth", "converged_share", "n_replicates", "verdict")
+            "width_over_truth", "converged_share", "n_replicates", "verdict", "exact_fail_chance")
     row = {k: summary[k] for k in keep if k in summary}
     row["seconds_median"] = float(np.median(summary["seconds"]))
     return row

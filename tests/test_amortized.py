@@ -663,6 +663,14 @@ def _rewrite(path, tmp_path, name, change):
     ("dim.zip", lambda m, meta: meta["summary"]["net"].__setitem__("dim", 9), "'summary.net.dim' is 9"),
     ("route.zip", lambda m, meta: meta.__setitem__("default_route", "fast"), "field 'default_route' is 'fast'"),
     ("weights.zip", lambda m, meta: m.__setitem__("summary.pt", m["ratio.pt"]), "member 'summary.pt'"),
+    ("knobs.zip", lambda m, meta: meta.__setitem__("route_settings", [0.9]), "field 'route_settings' is list"),
+    ("ess.zip", lambda m, meta: meta.__setitem__("route_settings", {"route_ess": 1.5}),
+     r"field 'route_settings': route_ess must be a number in \(0, 1\), got 1.5"),
+    ("sweeps.zip", lambda m, meta: meta.__setitem__("route_settings", {"route_max_sweeps": 2.5}),
+     "route_max_sweeps must be an integer >= 2"),
+    ("moves.zip", lambda m, meta: meta.__setitem__("route_settings", {"route_moves": "yes"}),
+     "route_moves must be true or false"),
+    ("unknown.zip", lambda m, meta: meta.__setitem__("route_settings", {"ess": 0.9}), "unknown route knob"),
 ])
 def test_a_damaged_summary_likelihood_is_refused_by_field(tiny, tmp_path, name, change, text):
     _, path = tiny
@@ -803,6 +811,41 @@ def test_smc_route_on_the_summary_likelihood_reports_its_run_and_status(tiny):
     assert status.headline.startswith("smc route: ")
     assert "tempered SMC from the amortized posterior on the summary likelihood (the route used): 200 particles" \
         in res.report()
+    assert ("its tempering: ESS share 0.7 a stage, sweeps until a particle has moved with probability 0.9 (at most "
+            "20), moves across the golf course off") in res.report()  # the defaults: the file states none
+
+
+def test_the_smc_route_runs_with_the_files_knobs_unless_the_settings_set_them(tiny, tmp_path):
+    """A file states the knobs its route table was made with (meta ``route_settings``): a
+    calibration takes them where the settings leave a knob unset, the settings' own where
+    set, and the built-in defaults where neither does; the run records what it ran with,
+    and adopting a route table writes its knobs into the file."""
+    from mdaug.inference.amortized.tempered import smc_route
+    from mdaug.inference.estimator_job import adopt_route_table
+    from mdaug.inference.samplers.smc import ROUTE_DEFAULTS
+    from mdaug.inference.settings import CalibrationSettings
+
+    est, path = tiny
+    _, y = simulate(est.spec, 1, 21)
+    knobs = {"route_ess": 0.95, "route_max_sweeps": 3, "n_particles": 120}
+    own = AmortizedEstimator.load(_rewrite(path, tmp_path, "own.zip", lambda m, meta: meta.update(route_settings=knobs)))
+    plain = CalibrationSettings(time_budget=20, progress=False)
+    _, run = smc_route(own, y[0], plain, 1, 2)
+    ran = run.extra["route_settings"]
+    assert ran == {**ROUTE_DEFAULTS, **knobs}  # the file's, the defaults for the rest
+    assert run.chain.shape[1] == 120 and max(run.extra["smc_sweeps"]) <= 3
+    _, run = smc_route(own, y[0], plain.with_plugin("smc", route_max_sweeps=5, n_particles=80), 1, 2)
+    assert run.extra["route_settings"] == {**ROUTE_DEFAULTS, "route_ess": 0.95, "route_max_sweeps": 5,
+                                           "n_particles": 80}  # the settings' own win
+    _, run = smc_route(est, y[0], plain.with_plugin("smc", n_particles=80), 1, 2)
+    assert run.extra["route_settings"] == {**ROUTE_DEFAULTS, "n_particles": 80}  # a file without knobs
+    table = {"drones": 3, "default": "smc", "route_settings": dict(ran), "rows": {}}
+    copy = AmortizedEstimator.load(path)
+    copy.meta["sbc"] = {"route_table": table}
+    adopt_route_table(copy)
+    assert copy.meta["default_route"] == "smc" and copy.meta["route_settings"] == ran
+    copy.save(tmp_path / "adopted.zip")
+    assert AmortizedEstimator.load(tmp_path / "adopted.zip").meta["route_settings"] == ran
 
 
 @pytest.mark.filterwarnings("ignore:.*unlike the estimator's training set")  # a tiny, two-epoch estimator

@@ -99,6 +99,29 @@ def test_route_table_passes_the_exact_posterior_fails_a_narrow_one_and_ranks_a_w
     assert rows["exact"]["log_score"] == pytest.approx(0.5 * np.log(2 * np.pi * np.e / 6), abs=0.12)
 
 
+def test_the_gates_noise_floor_is_how_often_exact_posteriors_fail_it():
+    """Exact posteriors of d independent quantities, R truths each, 199 draws: the share of
+    runs that fail the gate's coverage rule is :func:`exact_fail_chance`, and it falls with R."""
+    from mdaug.inference.diagnostics.routes import coverage
+    from mdaug.inference.result.status import COVERAGE_MIN, exact_fail_chance, noise_note
+
+    rng = np.random.default_rng(4)
+    runs, R, d = 400, 40, 8
+    fails = 0
+    for _ in range(runs):  # truth and draws from the same posterior: N(0, 1) per quantity
+        cov = coverage(rng.standard_normal((199, R, d)), rng.standard_normal((R, d)), [str(j) for j in range(d)])
+        fails += cov["coverage90_range"][0] < COVERAGE_MIN
+    chance = exact_fail_chance(R, d)
+    assert 0.6 < chance < 0.8  # 0.70: a 40-drone verdict on 8 quantities says little
+    assert fails / runs == pytest.approx(chance, abs=4 * np.sqrt(chance * (1 - chance) / runs))
+    assert exact_fail_chance(100, 35) == pytest.approx(0.94, abs=0.01)
+    assert exact_fail_chance(300, 35) == pytest.approx(0.33, abs=0.01) and exact_fail_chance(3000, 35) < 1e-6
+    assert exact_fail_chance(300, 35, n_draws=10 ** 6) == pytest.approx(0.08, abs=0.01)  # the 0.9 of many draws
+    assert "chance 0.94" in noise_note(100, 35) and noise_note(3000, 8) == "" and noise_note(None, 8) == ""
+    with pytest.raises(ValueError, match="1 truth"):
+        exact_fail_chance(0, 8)
+
+
 def test_a_density_route_is_scored_by_its_own_density_and_beats_the_gaussian_fit_when_bimodal():
     """x_i ~ N(|theta|, 1) (20 of them), theta ~ N(0, 1): the posterior is N(|theta|; m, v) / (2 Phi(m / sqrt v)),
     m = n xbar / (n + 1), v = 1 / (n + 1), two mirrored modes. A route that knows its

@@ -102,7 +102,8 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
                 "likelihood": est.likelihood_name, "evaluations": int(post.n_calls),
                 "particles": int(run.chain.shape[1]), "stages": int(run.extra["smc_stages"]),
                 "acceptance_last": float(run.acceptance.mean()),
-                "unique_share": float(run.extra["smc_unique_share"]), "log_evidence": float(run.extra["smc_log_z"])}
+                "unique_share": float(run.extra["smc_unique_share"]), "log_evidence": float(run.extra["smc_log_z"]),
+                "route_settings": run.extra["route_settings"]}
         if est.summary is not None:
             info["crb"] = _crb(post, np.median(run.draws(), axis=0))
         diag[sampled] = info
@@ -166,10 +167,9 @@ def _estimator_info(est) -> dict:
     m = est.meta
     return {"class": est.class_name, "ramps": est.spec.acquisition.ramps, "simulations": m.get("n_simulations"),
             "simulator": m["spec"].get("simulator"), "temperature": est.temperature,
-            "sbc": {r: {k: m["sbc"][r].get(k) for k in
-                                                                 ("outer_share", "coverage90_range", "n_replicates", "pooled_p")}
-                                                             for r in m.get("sbc", {}) if isinstance(m["sbc"][r], dict)
-                                                             and "outer_share" in m["sbc"][r]}}
+            "sbc": {r: {**{k: m["sbc"][r].get(k) for k in ("outer_share", "coverage90_range", "n_replicates",
+                                                             "pooled_p")}, "n_quantities": est.label_free.dim}
+                    for r in m.get("sbc", {}) if isinstance(m["sbc"][r], dict) and "outer_share" in m["sbc"][r]}}
 
 
 def _sbc_line(est, route: str) -> str:

@@ -361,6 +361,7 @@ def _summary(meta: dict, state: dict | None, est: AmortizedEstimator, src: str):
     route = meta.get("default_route", "amortized")
     if route not in ROUTES:
         raise EstimatorError(f"{src}: meta.json field 'default_route' is {route!r}; expected one of {', '.join(ROUTES)}")
+    check_route_settings(meta, src)
     if state is None and "summary" not in meta:
         return None
     if state is None or "summary" not in meta:
@@ -371,6 +372,24 @@ def _summary(meta: dict, state: dict | None, est: AmortizedEstimator, src: str):
                           est.label_free, src)
     except ValueError as exc:
         raise EstimatorError(str(exc)) from None
+
+
+def check_route_settings(meta: dict, src: str) -> None:
+    """Refuse a meta field ``route_settings`` (the smc route's knobs the file's route table
+    was made with, :data:`mdaug.inference.samplers.smc.ROUTE_KNOBS`) that is not an object
+    of known knobs in range, naming the file, the field and what was expected."""
+    from ..samplers.smc import ROUTE_KNOBS, check_route_knobs
+
+    knobs = meta.get("route_settings")
+    if knobs is None:
+        return
+    if not isinstance(knobs, dict):
+        raise EstimatorError(f"{src}: meta.json field 'route_settings' is {type(knobs).__name__}; expected an "
+                             f"object of some of {', '.join(ROUTE_KNOBS)}")
+    try:
+        check_route_knobs(knobs, where="meta.json field 'route_settings'")
+    except ValueError as exc:
+        raise EstimatorError(f"{src}: {exc}") from None
 
 
 # ---- reading a file as untrusted input -------------------------------------------------------------

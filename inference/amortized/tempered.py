@@ -19,7 +19,8 @@ reweighting, not from walkers crossing between modes. Knobs: the moves across th
 likelihood's golf course (:func:`sample_tempered`, :mod:`.redraw`: one coordinate or one
 quantity redrawn, one line moved, two engines swapped), the SMC plugin's ``route_*`` tempering, ``max_stages`` and ``n_particles``
 (:class:`mdaug.inference.samplers.smc.SMCSettings`; 0 means max(1000, 100 x dim)) and
-the shared ``time_budget``.
+the shared ``time_budget``; an estimator file may state its own (meta field
+``route_settings``, :func:`route_settings`), which unset knobs take.
 
 How fast to temper (the plugin's ``route_ess``, ``route_p_move``, ``route_max_sweeps``):
 HELI's 8 quantities are sampled well at 0.7, 0.9, 20. QUAD's 35 are not: each stage's few
@@ -48,6 +49,23 @@ def n_particles(settings, dim: int) -> int:
     return n + n % 2
 
 
+def route_settings(settings, est):
+    """``settings`` with the SMC plugin's route knobs resolved for the estimator ``est``:
+    each the settings' own where set, else the file's (meta field ``route_settings``: the
+    knobs its route table was made with, so that the route runs as it was judged), else
+    :data:`~mdaug.inference.samplers.smc.ROUTE_DEFAULTS`
+    (:meth:`~mdaug.inference.samplers.smc.SMCSettings.route`)."""
+    return settings.with_plugin("smc", **settings.of("smc").route(est.meta.get("route_settings")))
+
+
+def route_knobs(settings, dim: int) -> dict:
+    """The route knobs a run with these settings takes (unset ones at their defaults), the
+    particle count resolved: what a file's meta field ``route_settings`` records."""
+    knobs = settings.of("smc").route()
+    knobs["n_particles"] = n_particles(settings, dim)
+    return knobs
+
+
 MOVES = {"redraw": 0.15, "quantity_redraw": 0.15, "line_move": 0.1, "engine_swap": 0.1}
 """The moves across the golf course at the shares measured (:func:`sample_tempered`'s
 keywords; docs/calibration.md, "where the sampler went wrong"), which the SMC plugin's
@@ -70,7 +88,7 @@ def sample_tempered(post, log_q, u_start: np.ndarray, settings, seed, *, redraw:
     :class:`~mdaug.inference.settings.CalibrationSettings`. Returns a SamplerRun whose
     one stored step holds the N final particles (tau = N / the last reweighting's ESS).
     The tempering's knobs (:func:`run_smc`'s ess, p_move, max_sweeps) are the SMC plugin's
-    ``route_ess``, ``route_p_move``, ``route_max_sweeps``: by default 0.7, 0.9, 20, lighter
+    ``route_ess``, ``route_p_move``, ``route_max_sweeps`` (unset: 0.7, 0.9, 20), lighter
     than the plugin's own (0.9, 0.99, 40), which start from the prior: q starts near the
     posterior, and on HELI K = 32 these took 5-17 s per calibration (all converged) where
     the plugin's took 24-30 s for the same draws' spread. QUAD needs more
@@ -83,7 +101,7 @@ def sample_tempered(post, log_q, u_start: np.ndarray, settings, seed, *, redraw:
     draws and, half and half, of ``prior_u`` (prior draws in u, where given): the moves
     across the likelihood's golf course (:mod:`.redraw`), all 0 by default (the route's
     sampler); :data:`MOVES` holds the shares measured."""
-    own = settings.of("smc")
+    own = settings.of("smc").route()
     u_start = np.asarray(u_start, float)
     if len(u_start) < 4 or len(u_start) % 2:
         raise ValueError(f"need an even number (>= 4) of starting draws, got {len(u_start)}")
@@ -115,8 +133,9 @@ def sample_tempered(post, log_q, u_start: np.ndarray, settings, seed, *, redraw:
         kernels.append((line_move, LineMove(lf, sources, [1.0] * len(sources))))
     if engine_swap > 0 and lf.E > 1:
         kernels.append((engine_swap, EngineSwap(lf)))
-    res = run_smc(target, lambda k, rng: u_start, len(u_start), seed, ess_target=own.route_ess,
-                  p_move=own.route_p_move, max_sweeps=own.route_max_sweeps, max_stages=own.max_stages,
+    res = run_smc(target, lambda k, rng: u_start, len(u_start), seed, ess_target=own["route_ess"],
+                  p_move=own["route_p_move"], max_sweeps=own["route_max_sweeps"],
+                  max_stages=settings.of("smc").max_stages,
                   progress=settings.progress, time_budget=settings.time_budget, bounds=(lo - pad, hi + pad),
                   p_redraw=redraw, kernels=kernels)
     return sampler_run(res)
@@ -129,13 +148,16 @@ def smc_route(est, profiles: np.ndarray, settings, start_seed, seed, plug_in: np
     ``est.target(profiles, plug_in)``, the covariance held at ``plug_in`` (default: the
     starting draws' median). With the SMC plugin's ``route_moves`` (off by default) the
     moves across the golf course at the shares of :data:`MOVES`. Returns (that target,
-    the SamplerRun)."""
+    the SamplerRun, whose ``extra['route_settings']`` holds the knobs it ran with). The
+    route's knobs: :func:`route_settings` (the settings', else the file's, else the defaults)."""
+    settings = route_settings(settings, est)
     start, inside = est.sample_u(profiles, n_particles(settings, est.label_free.dim), start_seed, strict=False)
     post = est.target(profiles, plug_in=np.median(start, axis=0) if plug_in is None else plug_in)
     moves = settings.of("smc").route_moves
     extra = dict(MOVES, prior_u=prior_draws_u(est, len(start), seed)) if moves else {}
     run = sample_tempered(post, lambda v: est.log_prob_u(v, profiles), start, settings, seed, **extra)
     run.extra["start_inside_share"] = float(inside)
+    run.extra["route_settings"] = route_knobs(settings, est.label_free.dim)
     return post, run
 
 

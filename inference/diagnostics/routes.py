@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 
+from ..result.status import exact_fail_chance, noise_note
 from .sbc import summarise
 from .yardsticks import honest, log_score, verdict
 
@@ -77,6 +78,7 @@ def run(draw, truths_q: np.ndarray, data, names: list[str], *, n_rank: int = 199
     densities = [r[3] for r in results]
     out.update(log_score(su, tu, None if None in densities else np.array(densities)))
     out["ranks"] = out["ranks"].tolist()
+    out["exact_fail_chance"] = exact_fail_chance(len(truths_q), len(names))
     return out
 
 
@@ -122,7 +124,7 @@ def headline(summary: dict) -> str:
             f"rank chi-square pooled p {summary['pooled_p']:.3g}, TARP ATC {summary['tarp_atc']:.3f} "
             f"(KS p {summary['tarp_ks_p']:.2f}), "
             + (f"log score {summary['log_score']:.2f}{score_by(summary)}, " if "log_score" in summary else "")
-            + f"{summary['n_replicates']} truths")
+            + f"{summary['n_replicates']} truths" + noise_note(summary["n_replicates"], len(summary.get("names") or [])))
 
 
 def score_by(row: dict) -> str:

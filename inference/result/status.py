@@ -42,6 +42,47 @@ def honest(summary: dict) -> bool:
     return bool(summary["outer_share"] <= OUTER_MAX and summary["coverage90_range"][0] >= COVERAGE_MIN)
 
 
+def exact_fail_chance(n_truths: int, n_quantities: int, n_draws: int = 199) -> float:
+    """The chance that an exact posterior fails the gate's coverage rule (:func:`honest`)
+    on ``n_truths`` drones with ``n_quantities`` quantities, its 90% intervals taken from
+    ``n_draws`` draws a drone (the route table's 199). The truth and the draws are then
+    exchangeable, so the truth falls inside the interval between the draws' 5% and 95%
+    quantiles (numpy's linear interpolation, at order statistics 0.05 and 0.95 x (n - 1))
+    with probability p = 0.9 (n - 1) / (n + 1), 0.891 at 199 draws, not 0.9; a quantity's
+    coverage is a binomial(n_truths, p) share, and the rule fails when any of them falls
+    under COVERAGE_MIN: 1 - P(share >= COVERAGE_MIN)^d, the quantities taken independent
+    (correlated ones fail together, less often: an upper bound in practice). The outer-10%
+    share pools every rank and almost never passes OUTER_MAX by chance, so it is left
+    out. The rule's noise floor: an exact posterior fails it with chance 0.94 on 100 drones
+    of QUAD's 35 quantities, 0.33 on 300; 0.21 on 200 drones of HELI's 8. A verdict read
+    where this is large says little either way."""
+    import math
+
+    from scipy.stats import binom
+
+    n, d, k = int(n_truths), int(n_quantities), int(n_draws)
+    if n < 1 or d < 1 or k < 2:
+        raise ValueError(f"need >= 1 truth, >= 1 quantity and >= 2 draws, got {n}, {d} and {k}")
+    p = 0.9 * (k - 1) / (k + 1)
+    below = binom.cdf(math.ceil(COVERAGE_MIN * n - 1e-9) - 1, n, p)  # P(share < COVERAGE_MIN)
+    return float(1.0 - (1.0 - below) ** d)
+
+
+NOISY_GATE = 0.05
+"""Chance of an exact posterior failing the gate (:func:`exact_fail_chance`) from which
+a verdict is said to be noisy beside it."""
+
+
+def noise_note(n_truths, n_quantities) -> str:
+    """'' or, where an exact posterior would fail the gate on this many drones and
+    quantities with a chance of NOISY_GATE or more, the clause that says so."""
+    if not n_truths or not n_quantities:
+        return ""
+    chance = exact_fail_chance(n_truths, n_quantities)
+    return "" if chance < NOISY_GATE else (f" (an exact posterior fails this rule on {n_truths} drones and "
+                                           f"{n_quantities} quantities with chance {chance:.2f})")
+
+
 def verdict(summary: dict) -> str:
     """One word for the gate: 'honest' or 'overconfident'."""
     return "honest" if honest(summary) else "overconfident"
@@ -123,6 +164,7 @@ class CalibrationStatus:
         text = (f"on {n if n is not None else '?'} simulated drones, outer-10% share {s['outer_share']:.3f} (at most "
                 f"{OUTER_MAX:.2f}; 0.10 expected), 90% coverage {lo:.2f}-{hi:.2f} per quantity (at least "
                 f"{COVERAGE_MIN:.2f})")
+        text += noise_note(n, s.get("n_quantities"))
         return text + (f"; {self.rank_note}" if self.rank_note else "")
 
     @property
@@ -241,7 +283,7 @@ def calibration_status(source) -> CalibrationStatus:
     if sbc and sbc.get("outer_share") is not None and sbc.get("coverage90_range"):
         passed, honesty = honest(sbc), verdict(sbc)
         note = rank_note(sbc.get("pooled_p"), passed)
-        sbc = {k: sbc.get(k) for k in ("outer_share", "coverage90_range", "n_replicates", "pooled_p")}
+        sbc = {k: sbc.get(k) for k in ("outer_share", "coverage90_range", "n_replicates", "pooled_p", "n_quantities")}
     else:
         passed, honesty, note, sbc = None, NO_SBC, "", None
     return CalibrationStatus(route=route, route_words=words, converged=bool(d["converged"]), convergence=convergence,

@@ -29,10 +29,12 @@ class SMCSettings(PluginSettings):
     posterior, :mod:`mdaug.inference.amortized.tempered`) adds its moves across the
     golf course at the shares measured (``tempered.MOVES``); off by default (why: there).
     ``route_ess``, ``route_p_move``, ``route_max_sweeps``: that route's tempering, lighter
-    than the plugin's own (it starts from the amortized posterior, near the target):
-    0.7, 0.9, 20 by default; :data:`THOROUGH_ROUTE` is slower tempering with longer
-    rejuvenation (the sampler QUAD's 35 quantities need: ``tempered`` says what it
-    measured).
+    than the plugin's own (it starts from the amortized posterior, near the target);
+    :data:`THOROUGH_ROUTE` is slower tempering with longer rejuvenation (the sampler
+    QUAD's 35 quantities need: ``tempered`` says what it measured). The four ``route_*``
+    knobs are None unless set: then the estimator file's own (its meta field
+    ``route_settings``, the knobs its route table was made with), else
+    :data:`ROUTE_DEFAULTS` (:meth:`route`).
     """
 
     n_particles: int = 0
@@ -43,10 +45,10 @@ class SMCSettings(PluginSettings):
     max_stages: int = 500
     jump: float = 0.1
     polish: int = 8
-    route_moves: bool = False
-    route_ess: float = 0.7
-    route_p_move: float = 0.9
-    route_max_sweeps: int = 20
+    route_moves: bool | None = None
+    route_ess: float | None = None
+    route_p_move: float | None = None
+    route_max_sweeps: int | None = None
 
     LEGACY = {"smc_ess": "ess", "smc_redraw": "redraw", "smc_p_move": "p_move", "smc_max_sweeps": "max_sweeps",
               "smc_max_stages": "max_stages", "smc_jump": "jump", "smc_polish": "polish"}  # the old flat names
@@ -58,17 +60,58 @@ class SMCSettings(PluginSettings):
         if not (0 < self.ess < 1 and 0 < self.p_move < 1 and 0 <= self.redraw < 1):
             raise ValueError(f"smc_ess and smc_p_move must be in (0, 1) and smc_redraw in [0, 1), got "
                              f"{self.ess}, {self.p_move}, {self.redraw}")
-        if not (0 < self.route_ess < 1 and 0 < self.route_p_move < 1 and self.route_max_sweeps >= 2):
-            raise ValueError(f"route_ess and route_p_move must be in (0, 1) and route_max_sweeps >= 2, got "
-                             f"{self.route_ess}, {self.route_p_move}, {self.route_max_sweeps}")
+        check_route_knobs({k: getattr(self, k) for k in ROUTE_DEFAULTS})
         if self.n_particles < 0 or self.n_particles == 1 or self.max_sweeps < 2 or self.max_stages < 1:
             raise ValueError("CalibrationSettings: n_particles must be 0 (auto) or >= 2, smc_max_sweeps >= 2 "
                              "and smc_max_stages >= 1")
+
+    def route(self, file_knobs: dict | None = None) -> dict:
+        """The smc route's knobs (:data:`ROUTE_KNOBS`), each this setting's where set (a
+        ``route_*`` knob not None, ``n_particles`` not 0), else the estimator file's
+        (``file_knobs``, its meta field ``route_settings``), else :data:`ROUTE_DEFAULTS`
+        (``n_particles`` 0 then: the route's own count, ``tempered.n_particles``)."""
+        file_knobs = file_knobs or {}
+        out = {k: getattr(self, k) if getattr(self, k) is not None else file_knobs.get(k, v)
+               for k, v in ROUTE_DEFAULTS.items()}
+        out["n_particles"] = self.n_particles or int(file_knobs.get("n_particles", 0))
+        return out
 
     @classmethod
     def quick(cls) -> "SMCSettings":
         """For tests and ``--quick``: 3 particles polished per mode search."""
         return cls(polish=3)
+
+
+ROUTE_DEFAULTS = {"route_moves": False, "route_ess": 0.7, "route_p_move": 0.9, "route_max_sweeps": 20}
+"""The smc route's tempering where neither the settings nor the estimator file set it
+(HELI's 8 quantities are sampled well at these; :mod:`mdaug.inference.amortized.tempered`)."""
+ROUTE_KNOBS = (*ROUTE_DEFAULTS, "n_particles")
+"""The knobs an estimator file may state for its smc route (meta field ``route_settings``)."""
+
+
+def check_route_knobs(knobs: dict, where: str = "CalibrationSettings") -> None:
+    """ValueError naming ``where`` and the knob for a route knob (:data:`ROUTE_KNOBS`) out
+    of range or of the wrong type; None passes (not set). Keys outside ROUTE_KNOBS are refused."""
+    unknown = sorted(set(knobs) - set(ROUTE_KNOBS))
+    if unknown:
+        raise ValueError(f"{where}: unknown route knob(s) {', '.join(unknown)}; expected some of {', '.join(ROUTE_KNOBS)}")
+    rules = {"route_moves": (lambda v: isinstance(v, bool), "true or false"),
+             "route_ess": (lambda v: _number(v) and 0 < v < 1, "a number in (0, 1)"),
+             "route_p_move": (lambda v: _number(v) and 0 < v < 1, "a number in (0, 1)"),
+             "route_max_sweeps": (lambda v: _integer(v) and v >= 2, "an integer >= 2"),
+             "n_particles": (lambda v: _integer(v) and (v == 0 or v >= 4), "0 (auto) or an integer >= 4")}
+    for k, v in knobs.items():
+        ok, expected = rules[k]
+        if v is not None and not ok(v):
+            raise ValueError(f"{where}: {k} must be {expected}, got {v!r}")
+
+
+def _number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
+
+
+def _integer(v) -> bool:
+    return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
 
 
 THOROUGH_ROUTE = {"route_moves": True, "route_ess": 0.9, "route_p_move": 0.99, "route_max_sweeps": 60,

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 import warnings
 
@@ -76,7 +77,7 @@ def main(argv=None) -> int:
     from mdaug.inference.amortized.estimator import AmortizedEstimator, EstimatorError
     from mdaug.inference.amortized.shipped import shipped_path
     from mdaug.inference.amortized.tempered import MOVES
-    from mdaug.inference.samplers.smc import THOROUGH_ROUTE
+    from mdaug.inference.samplers.smc import THOROUGH_ROUTE, SMCSettings
     from mdaug.inference.estimator_job import sbc_data
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -87,9 +88,10 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=502)
     ap.add_argument("--particles", type=int, default=1000)
     ap.add_argument("--covariance", choices=("reference", "plug-in"), default="reference")
-    ap.add_argument("--ess", type=float, default=0.7, help="the tempering's ESS share per stage (the route's: 0.7)")
-    ap.add_argument("--p-move", type=float, default=0.9, help="the route's: 0.9")
-    ap.add_argument("--max-sweeps", type=int, default=20, help="the route's: 20")
+    ap.add_argument("--ess", type=float, default=None,
+                    help="the tempering's ESS share per stage (default: the file's route, else 0.7)")
+    ap.add_argument("--p-move", type=float, default=None, help="default: the file's route, else 0.9")
+    ap.add_argument("--max-sweeps", type=int, default=None, help="default: the file's route, else 20")
     ap.add_argument("--moves", action="store_true",
                     help=f"the moves across the golf course at the shares measured ({MOVES}); "
                          "the four options below set them one by one")
@@ -99,20 +101,29 @@ def main(argv=None) -> int:
     ap.add_argument("--engine-swap", type=float, default=None,
                     help="share of engine swaps, several engines only (the route's: 0)")
     ap.add_argument("--thorough", action="store_true",
-                    help="the moves, --ess, --p-move, --max-sweeps and --particles of samplers.smc.THOROUGH_ROUTE")
+                    help="the moves, --ess, --p-move, --max-sweeps and --particles of samplers.smc.THOROUGH_ROUTE "
+                         "(those given explicitly win)")
     ap.add_argument("--time-budget", type=float, default=180.0)
     ap.add_argument("--workers", type=int, default=2)
     a = ap.parse_args(argv)
-    if a.thorough:
+    if a.thorough:  # its knobs where not given explicitly
         a.moves = True
-        a.ess, a.p_move, a.max_sweeps, a.particles = (THOROUGH_ROUTE[k] for k in ("route_ess", "route_p_move",
-                                                                                  "route_max_sweeps", "n_particles"))
-    for k, v in MOVES.items():
-        if getattr(a, k) is None:
-            setattr(a, k, v if a.moves else 0.0)
+        for opt, knob in (("ess", "route_ess"), ("p_move", "route_p_move"), ("max_sweeps", "route_max_sweeps")):
+            if getattr(a, opt) is None:
+                setattr(a, opt, THOROUGH_ROUTE[knob])
+        if "--particles" not in " ".join(argv if argv is not None else sys.argv[1:]):
+            a.particles = THOROUGH_ROUTE["n_particles"]
     t0 = time.perf_counter()
     path = str(a.from_file or shipped_path(a.cls, a.ramps))
     est = AmortizedEstimator.load(path)
+    route = SMCSettings().route(est.meta.get("route_settings"))  # the file's route, else the defaults
+    a.moves = a.moves or route["route_moves"]
+    for opt in ("ess", "p_move", "max_sweeps"):
+        if getattr(a, opt) is None:
+            setattr(a, opt, route[f"route_{opt}"])
+    for k, v in MOVES.items():
+        if getattr(a, k) is None:
+            setattr(a, k, v if a.moves else 0.0)
     try:
         est.summary_model(path)
     except EstimatorError as exc:

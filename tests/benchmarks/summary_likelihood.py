@@ -49,6 +49,9 @@ def table(rows: dict, names: list[str], crb: dict | None = None) -> str:
         lines.append(f"{'CRB':10s} {'':13s} {'':6s} {'':10s} {'':9s} {'':5s} {'':7s}  "
                      + " ".join(f"{crb[n]:.2f}" for n in names))
     lines.append("(* the route's own density at the truth; else a Gaussian fitted to its draws)")
+    chance = next((r["exact_fail_chance"] for r in rows.values() if "exact_fail_chance" in r), None)
+    if chance is not None:
+        lines.append(f"(an exact posterior fails the gate's coverage rule on these drones with chance {chance:.2f})")
     return "\n".join(lines)
 
 
@@ -62,7 +65,7 @@ def main(argv=None) -> int:
     from mdaug.inference.amortized.simulate import load_shards
     from mdaug.inference.emulator.model import from_parts, to_parts
     from mdaug.inference.emulator.train import train_summary_model
-    from mdaug.inference.estimator_job import estimator_sbc, name_default_route, specimen_table
+    from mdaug.inference.estimator_job import adopt_route_table, estimator_sbc, name_default_route, specimen_table
     from mdaug.inference.samplers.smc import THOROUGH_ROUTE
     from mdaug.inference.settings import CalibrationSettings
 
@@ -124,7 +127,7 @@ def main(argv=None) -> int:
     report = {**report, "command": "python tests/benchmarks/summary_likelihood.py " + " ".join(sys.argv[1:])}
     est.with_summary(model, report)
     est.save(a.out)  # the routes read the file in their worker processes
-    knobs = dict(THOROUGH_ROUTE) if a.thorough else {"route_moves": a.moves}
+    knobs = dict(THOROUGH_ROUTE) if a.thorough else {"route_moves": True} if a.moves else {}  # else the file's
     settings = CalibrationSettings(progress=False, time_budget=a.time_budget).with_plugin("smc", **knobs)
     names = lf.names[:8]
     routes = tuple(a.routes.split(",")) if a.routes else None
@@ -149,8 +152,8 @@ def main(argv=None) -> int:
     if new.get("route_table"):  # honest on the prior, sharpest where users are
         name_default_route(new)
     est.meta["sbc"] = new
-    default = (new.get("route_table") or {}).get("default") or "amortized"
-    est.meta["default_route"] = default
+    adopt_route_table(est)
+    default = est.meta["default_route"]
     est.save(a.out)
     print(f"\ndefault route: {default}; wrote {a.out} ({time.perf_counter() - t0:.0f} s)")
     return 0
