@@ -237,6 +237,11 @@ def run_sbc(args) -> int:
     if "route_table" in out:
         t = out["route_table"]
         result(f"{cls} K={args.ramps} default route: {t['default']} ({t['default_by']})")
+        if "route_settings" in t:
+            k = t["route_settings"]
+            result(f"  the smc route's knobs (the settings', else the file's, else the defaults): ESS share "
+                   f"{k['route_ess']:g}, p_move {k['route_p_move']:g}, at most {k['route_max_sweeps']} sweeps, "
+                   f"moves {'on' if k['route_moves'] else 'off'}, {k['n_particles']} particles")
     if args.figure is not None:
         from ..inference.diagnostics.sbc_figure import sbc_figure
 
