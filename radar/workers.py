@@ -68,13 +68,20 @@ def stop_processes(processes, timeout: float = 5.0) -> None:
                 p.join(1.0)
 
 
-def stop_pool(pool) -> None:
+def stop_pool(pool, timeout: float = 5.0) -> None:
     """Stop a concurrent.futures ProcessPoolExecutor now: pending jobs cancelled, its
-    workers terminated and waited for."""
+    workers terminated and waited for, and then its manager thread (which closes the
+    pool's wake-up pipe as it ends: left running, it races the interpreter's exit hook,
+    which writes to that pipe, and Python 3.11 then prints "Exception ignored ... Bad file
+    descriptor" after the command's one line)."""
     processes = list((getattr(pool, "_processes", None) or {}).values())
     with contextlib.suppress(Exception):
         pool.shutdown(wait=False, cancel_futures=True)
     stop_processes(processes)
+    manager = getattr(pool, "_executor_manager_thread", None)
+    if manager is not None:
+        with contextlib.suppress(Exception):
+            manager.join(timeout)
 
 
 @contextlib.contextmanager
