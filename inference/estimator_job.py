@@ -222,10 +222,9 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
                 log(f"  SBC {name} ({est.likelihood_name} likelihood): {headline(out[name])}; converged "
                     f"{out[name]['converged_share']:.2f}")
         from .amortized.tempered import route_knobs
-        from .amortized.tempered import route_settings as resolved
 
         out["route_table"] = {"drones": int(k), "default": table["default"],
-                              "route_settings": route_knobs(resolved(settings, est), lf.dim),
+                              "route_settings": route_knobs(settings, est),
                               "rows": {n: _row(r) for n, r in table["rows"].items()}}
     if specimens:  # drones like a user's: the table's routes, or the amortized route alone without a table
         s_seed = child_seed(seed, "specimens") if specimen_seed is None else specimen_seed
@@ -348,9 +347,9 @@ def specimen_table(est: AmortizedEstimator, n: int, *, settings=None, seed: int 
                               workers=workers if estimator_path is not None else 1))
     out = {"drones": int(n), "near_width": 1.0, "rows": rows}
     if "smc" in rows:
-        from .amortized.tempered import route_knobs, route_settings
+        from .amortized.tempered import route_knobs
 
-        out["route_settings"] = route_knobs(route_settings(settings, est), lf.dim)
+        out["route_settings"] = route_knobs(settings, est)
     if est.summary is not None:
         from .emulator.posterior import EmulatedPosterior
 

@@ -118,6 +118,10 @@ def test_the_gates_noise_floor_is_how_often_exact_posteriors_fail_it():
     assert exact_fail_chance(300, 35) == pytest.approx(0.33, abs=0.01) and exact_fail_chance(3000, 35) < 1e-6
     assert exact_fail_chance(300, 35, n_draws=10 ** 6) == pytest.approx(0.08, abs=0.01)  # the 0.9 of many draws
     assert "chance 0.94" in noise_note(100, 35) and noise_note(3000, 8) == "" and noise_note(None, 8) == ""
+    from mdaug.inference.result.status import lowest_coverage_chance
+
+    assert lowest_coverage_chance(300, 35, 0.827) == pytest.approx(0.019, abs=0.002)  # QUAD's smc route's lowest
+    assert lowest_coverage_chance(100, 35, 0.84) == pytest.approx(exact_fail_chance(100, 35))  # the same model
     with pytest.raises(ValueError, match="1 truth"):
         exact_fail_chance(0, 8)
 

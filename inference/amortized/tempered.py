@@ -58,11 +58,13 @@ def route_settings(settings, est):
     return settings.with_plugin("smc", **settings.of("smc").route(est.meta.get("route_settings")))
 
 
-def route_knobs(settings, dim: int) -> dict:
-    """The route knobs a run with these settings takes (unset ones at their defaults), the
-    particle count resolved: what a file's meta field ``route_settings`` records."""
+def route_knobs(settings, est) -> dict:
+    """The route knobs the smc route of ``est`` takes with these settings
+    (:func:`route_settings`), the particle count resolved: what a run, a route table and a
+    file's meta field ``route_settings`` record."""
+    settings = route_settings(settings, est)
     knobs = settings.of("smc").route()
-    knobs["n_particles"] = n_particles(settings, dim)
+    knobs["n_particles"] = n_particles(settings, est.label_free.dim)
     return knobs
 
 
@@ -157,7 +159,7 @@ def smc_route(est, profiles: np.ndarray, settings, start_seed, seed, plug_in: np
     extra = dict(MOVES, prior_u=prior_draws_u(est, len(start), seed)) if moves else {}
     run = sample_tempered(post, lambda v: est.log_prob_u(v, profiles), start, settings, seed, **extra)
     run.extra["start_inside_share"] = float(inside)
-    run.extra["route_settings"] = route_knobs(settings, est.label_free.dim)
+    run.extra["route_settings"] = route_knobs(settings, est)
     return post, run
 
 

@@ -58,13 +58,26 @@ def exact_fail_chance(n_truths: int, n_quantities: int, n_draws: int = 199) -> f
     where this is large says little either way."""
     import math
 
+    n = int(n_truths)
+    return _lowest_at_most(n, n_quantities, math.ceil(COVERAGE_MIN * n - 1e-9) - 1, n_draws)  # a share < COVERAGE_MIN
+
+
+def lowest_coverage_chance(n_truths: int, n_quantities: int, coverage: float, n_draws: int = 199) -> float:
+    """The chance that an exact posterior's lowest 90% coverage of ``n_quantities`` on
+    ``n_truths`` drones is ``coverage`` or lower (:func:`exact_fail_chance`'s model): how
+    far below the noise a route's lowest coverage lies."""
+    return _lowest_at_most(int(n_truths), n_quantities, int(round(coverage * int(n_truths))), n_draws)
+
+
+def _lowest_at_most(n: int, d: int, count: int, n_draws: int) -> float:
+    """1 - P(binomial(n, p) > count)^d, p = 0.9 (n_draws - 1) / (n_draws + 1): the chance that
+    the lowest of d independent coverage counts of an exact posterior is count or fewer."""
     from scipy.stats import binom
 
-    n, d, k = int(n_truths), int(n_quantities), int(n_draws)
+    d, k = int(d), int(n_draws)
     if n < 1 or d < 1 or k < 2:
         raise ValueError(f"need >= 1 truth, >= 1 quantity and >= 2 draws, got {n}, {d} and {k}")
-    p = 0.9 * (k - 1) / (k + 1)
-    below = binom.cdf(math.ceil(COVERAGE_MIN * n - 1e-9) - 1, n, p)  # P(share < COVERAGE_MIN)
+    below = binom.cdf(count, n, 0.9 * (k - 1) / (k + 1))
     return float(1.0 - (1.0 - below) ** d)
 
 

@@ -49,11 +49,11 @@ def _pool(parts: list[dict], names: list[str]) -> dict:
 
 def main(argv=None) -> int:
     import torch
-    from scipy.stats import binom
 
     from mdaug.inference.amortized.estimator import AmortizedEstimator
     from mdaug.inference.diagnostics.routes import run
     from mdaug.inference.estimator_job import Route, sbc_data
+    from mdaug.inference.result.status import lowest_coverage_chance
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="+", type=_run, metavar="FILE:SEED:WORKERS")
@@ -76,8 +76,7 @@ def main(argv=None) -> int:
           f"{est.class_name} K = {est.spec.acquisition.ramps}, {d} quantities:")
     for name, r in rows.items():
         lo, hi = r["coverage90_range"]
-        k = int(round(lo * r["n_replicates"]))
-        p_low = 1 - (1 - binom.cdf(k, r["n_replicates"], 0.9 * 198 / 200)) ** d  # an exact posterior this low
+        p_low = lowest_coverage_chance(r["n_replicates"], d, lo)  # an exact posterior this low
         print(f"{name:10s} {r['verdict']:13s} outer {r['outer_share']:.3f}  coverage {lo:.3f}-{hi:.3f}  log score "
               f"{r['log_score']:.2f}  TARP {r['tarp_atc']:.3f}  lowest: "
               + ", ".join(f"{q} {v:.3f}" for q, v in r["lowest"])
