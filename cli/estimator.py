@@ -203,6 +203,7 @@ def run_sbc(args) -> int:
     from ..inference.diagnostics.routes import headline, score_by
     from ..inference.amortized.shipped import find
     from ..inference.settings import CalibrationSettings
+    from ..inference.samplers.smc import describe_route_knobs
     from ..radar.progress import progress_enabled
     from .guard import Output, check_paths
 
@@ -239,9 +240,8 @@ def run_sbc(args) -> int:
         result(f"{cls} K={args.ramps} default route: {t['default']} ({t['default_by']})")
         if "route_settings" in t:
             k = t["route_settings"]
-            result(f"  the smc route's knobs (the settings', else the file's, else the defaults): ESS share "
-                   f"{k['route_ess']:g}, p_move {k['route_p_move']:g}, at most {k['route_max_sweeps']} sweeps, "
-                   f"moves {'on' if k['route_moves'] else 'off'}, {k['n_particles']} particles")
+            result("  the smc route's knobs (the settings', else the file's, else the defaults): "
+                   + describe_route_knobs(k))
     if args.figure is not None:
         from ..inference.diagnostics.sbc_figure import sbc_figure
 

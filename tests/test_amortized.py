@@ -497,8 +497,9 @@ def test_train_estimator_and_sbc_verbs(tmp_path, capsys, refused):
     assert "HELI K=4 smc on 2 specimen drones: log score" in text
     assert table["route_settings"] == data["specimens"]["route_settings"] == {
         "route_moves": False, "route_ess": 0.7, "route_p_move": 0.9, "route_max_sweeps": 20, "n_particles": 1000}
-    assert ("the smc route's knobs (the settings', else the file's, else the defaults): ESS share 0.7, p_move 0.9, "
-            "at most 20 sweeps, moves off, 1000 particles") in text
+    assert ("the smc route's knobs (the settings', else the file's, else the defaults): ESS share 0.7 a stage, "
+            "sweeps until a particle has moved with probability 0.9 (at most 20), moves across the golf course off, "
+            "1000 particles") in text
     assert "(an exact posterior fails this rule on 3 drones and 8 quantities with chance" in text  # noise floor
     if not torch.cuda.is_available():
         empty = tmp_path / "empty"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..samplers.smc import describe_route_knobs
 from .status import (
     BEST_FIT_BESIDE,
     best_fit_beside,
@@ -98,9 +99,7 @@ def amortized_report(res, identified_ratio: float) -> str:
                      + "{}: {}".format(*chain_words(m["converged"], m["reason"])))
         if "route_settings" in m:  # results of earlier releases have none
             k = m["route_settings"]
-            lines.append(f"  its tempering: ESS share {k['route_ess']:g} a stage, sweeps until a particle has moved "
-                         f"with probability {k['route_p_move']:g} (at most {k['route_max_sweeps']}), moves across "
-                         f"the golf course {'on' if k['route_moves'] else 'off'}")
+            lines.append("  its tempering: " + describe_route_knobs(k, particles=False))
     lines.append(f"posterior used by the strategies: {d['route']} route"
                  + (f"; best fit (sigma_p_fit's centre): {BEST_FIT_BESIDE}" if best_fit_beside(d) else "")
                  + ("; best fit: the component-wise median of the draws (no labelling of their label-free "

@@ -89,6 +89,15 @@ ROUTE_KNOBS = (*ROUTE_DEFAULTS, "n_particles")
 """The knobs an estimator file may state for its smc route (meta field ``route_settings``)."""
 
 
+def describe_route_knobs(knobs: dict, particles: bool = True) -> str:
+    """The smc route's knobs (:data:`ROUTE_KNOBS`, resolved) in words: one wording for the
+    report, ``mdaug sbc`` and the route tables. particles: name the particle count too."""
+    words = (f"ESS share {knobs['route_ess']:g} a stage, sweeps until a particle has moved with probability "
+             f"{knobs['route_p_move']:g} (at most {knobs['route_max_sweeps']}), moves across the golf course "
+             f"{'on' if knobs['route_moves'] else 'off'}")
+    return words + (f", {knobs['n_particles']} particles" if particles and "n_particles" in knobs else "")
+
+
 def check_route_knobs(knobs: dict, where: str = "CalibrationSettings") -> None:
     """ValueError naming ``where`` and the knob for a route knob (:data:`ROUTE_KNOBS`) out
     of range or of the wrong type; None passes (not set). Keys outside ROUTE_KNOBS are refused."""
