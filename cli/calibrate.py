@@ -8,6 +8,7 @@ message says which exist).
 """
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 from .common import (BYTES_SPECTRUM, EXIT_NOT_CONVERGED, SECONDS_LIKELIHOOD_RAMP, add_verb, check_size, count, count_2, ramps_factor,
@@ -22,6 +23,27 @@ engines_arg = count(1, what="a positive integer or 'auto'", words=("auto",))
 
 walkers_arg = count(2, what="an integer >= 2 (0 is not allowed here: leave the option out for auto)")
 particles_arg = count(2, what="an integer >= 2 (leave the option out for auto)")
+
+
+def route_knob_arg(text: str) -> tuple[str, object]:
+    """``--route-knob NAME=VALUE``: one of the smc route's knobs (the names an estimator file's
+    meta field ``route_settings`` uses), its value typed and checked."""
+    from ..inference.samplers.smc import ROUTE_KNOBS, check_route_knobs
+
+    name, sep, value = text.partition("=")
+    name, value = name.strip(), value.strip()
+    if not sep or name not in ROUTE_KNOBS:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected NAME=VALUE with NAME one of {', '.join(ROUTE_KNOBS)}")
+    try:
+        typed = ({"true": True, "on": True, "false": False, "off": False}[value.lower()] if name == "route_moves"
+                 else int(value) if name in ("route_max_sweeps", "n_particles") else float(value))
+    except (KeyError, ValueError):
+        typed = value  # left as text: check_route_knobs says what the knob takes
+    try:
+        check_route_knobs({name: typed}, where=repr(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return name, typed
 
 
 def _cap(value) -> str:
@@ -112,6 +134,8 @@ def settings_from_args(args, base):
         if getattr(args, dest) is not None:
             for plugin, knob in targets:
                 settings = settings.with_plugin(plugin, **{knob: getattr(args, dest)})
+    if getattr(args, "route_knob", None):  # the last of a knob given twice wins
+        settings = settings.with_plugin("smc", **dict(args.route_knob))
     return settings
 
 
@@ -306,6 +330,11 @@ def add_calibrate(sub, parents, help):
                         "from the amortized posterior to the posterior of the estimator's likelihood (the summary "
                         "likelihood where it has one; weights between its modes) (default: the estimator's "
                         "default route)")
+    g.add_argument("--route-knob", action="append", type=route_knob_arg, default=None, metavar="NAME=VALUE",
+                   help="one of the smc route's knobs, over the estimator file's own (its meta field "
+                        "route_settings) and the defaults: route_ess (ESS share kept a tempering stage), "
+                        "route_p_move, route_max_sweeps, route_moves (true/false), n_particles; repeat for more "
+                        "(default: the file's, else the defaults)")
     g.add_argument("--check-route", action="store_true",
                    help="also run another route and keep its draws beside the posterior, as a check: smc "
                         "beside the amortized route, the amortized draws beside the smc route's (default: only "

@@ -40,6 +40,7 @@ def calibration_method(args, acquisition) -> str:
                              "calibration (the default for measured acquisitions) has no such setting")
     else:
         given = [o for o, v in (("--estimator", args.estimator), ("--route", args.route),
+                                ("--route-knob", getattr(args, "route_knob", None)),
                                 ("--check-route", args.check_route or None)) if v is not None]
         if given:
             raise ValueError(f"{given[0]} applies to --method amortized")

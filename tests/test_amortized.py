@@ -423,6 +423,15 @@ def test_calibrate_verb_writes_an_amortized_posterior(tiny, tmp_path, capsys):
                  str(hot), "--time-budget", "20", "--seed", "5"]) == 0
     assert "its draws inside the prior, drawn at temperature 1.2 (the file's" in capsys.readouterr().out
     assert CalibrationResult.load(tmp_path / "hot.nc", class_name="HELI").diagnostics["estimator"]["temperature"] == 1.2
+    knobbed = tmp_path / "knobs.nc"  # --route-knob: the smc route's knobs over the file's and the defaults
+    assert main(["calibrate", str(data), "--class", "HELI", "--out", str(knobbed), "--estimator", str(path),
+                 "--time-budget", "20", "--seed", "5", "--route-knob", "route_max_sweeps=3", "--route-knob",
+                 "n_particles=60", "--route-knob", "route_ess=0.8", "--route-knob", "route_moves=on"]) == 0
+    text = capsys.readouterr().out
+    ran = CalibrationResult.load(knobbed, class_name="HELI").diagnostics["smc"]["route_settings"]
+    assert ran == {"route_moves": True, "route_ess": 0.8, "route_p_move": 0.9, "route_max_sweeps": 3, "n_particles": 60}
+    assert ("its tempering: ESS share 0.8 a stage, sweeps until a particle has moved with probability 0.9 (at most "
+            "3), moves across the golf course on") in text
 
 
 def test_calibrate_verb_refuses_what_the_estimator_cannot_take(tiny, tmp_path, refused):
@@ -448,6 +457,12 @@ def test_calibrate_verb_refuses_what_the_estimator_cannot_take(tiny, tmp_path, r
              "--max-steps", "200"], inputs, out, ["--max-steps applies to --method likelihood"])  # emcee's knob
     refused(["calibrate", str(good), "--class", "HELI", "--out", post, "--estimator", str(inputs / "none.zip")],
             inputs, out, ["none.zip"])
+    refused(["calibrate", str(good), "--class", "HELI", "--out", post, "--route-knob", "route_ess=1.5"], inputs, out,
+            ["--route-knob", "route_ess must be a number in (0, 1), got 1.5"])
+    refused(["calibrate", str(good), "--class", "HELI", "--out", post, "--route-knob", "ess=0.9"], inputs, out,
+            ["'ess=0.9': expected NAME=VALUE with NAME one of route_moves, route_ess"])
+    refused(["calibrate", str(good), "--class", "HELI", "--out", post, "--method", "likelihood", "--route-knob",
+             "route_ess=0.8"], inputs, out, ["--route-knob applies to --method amortized"])
 
 
 def test_calibrate_refuses_too_many_measurements_of_one_drone(tmp_path, refused):
