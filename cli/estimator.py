@@ -227,14 +227,16 @@ def run_sbc(args) -> int:
             continue
         result(f"{cls} K={args.ramps} {route}: {headline(s)}")
         prior = s.get("prior_width_over_truth")  # the amortized route's SBC carries the prior's beside
-        widths = " ".join(f"{k.split()[2][0]}{k.split()[1]}{k[-3:]} {v:.2f}" + (f"/{prior[k]:.2f}" if prior else "")
-                          for k, v in s["width_over_truth"].items() if k.startswith("line"))
-        result(f"  median 90% width / truth{' (posterior/prior)' if prior else ''}: {widths}")
+        if "width_over_truth" in s:  # a stacked row, derived from two routes' ranks, has no draws to measure
+            widths = " ".join(f"{k.split()[2][0]}{k.split()[1]}{k[-3:]} {v:.2f}" + (f"/{prior[k]:.2f}" if prior else "")
+                              for k, v in s["width_over_truth"].items() if k.startswith("line"))
+            result(f"  median 90% width / truth{' (posterior/prior)' if prior else ''}: {widths}")
     if "specimens" in out:
         for route, s in out["specimens"]["rows"].items():
-            widths = " ".join(f"{v:.2f}" for k, v in s["width_over_truth"].items() if k.startswith("line"))
+            widths = " ".join(f"{v:.2f}" for k, v in s.get("width_over_truth", {}).items() if k.startswith("line"))
             result(f"{cls} K={args.ramps} {route} on {out['specimens']['drones']} specimen drones: log score "
-                   f"{s['log_score']:.2f}{score_by(s)}, lines' median 90% width / truth {widths}")
+                   f"{s['log_score']:.2f}{score_by(s)}" + (f", lines' median 90% width / truth {widths}" if widths
+                                                           else ""))
     if "route_table" in out:
         t = out["route_table"]
         result(f"{cls} K={args.ramps} default route: {t['default']} ({t['default_by']})")

@@ -211,11 +211,17 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
 
         settings = route_settings or CalibrationSettings(progress=False)
         k = min(route_truths, n_truths)
+        wanted = tuple(routes or sampled_routes(est))
         routes = {name: Route(name, est if estimator_path is None else estimator_path, settings)
-                  for name in (routes or sampled_routes(est))}
+                  for name in runs_for(est, wanted)}
         table = route_table(routes, truths[:k], profiles[:k], lf.names, to_unbounded=lf.to_unbounded, seed=seed,
                             progress=progress, workers=workers if estimator_path is not None else 1)
-        for name in routes:
+        add_stacked(est, table["rows"], wanted)
+        if "stacked" in wanted:
+            from .diagnostics.routes import default_route
+
+            table["default"] = default_route(table["rows"])
+        for name in table["rows"]:
             if name != "amortized":
                 out[name] = table["rows"][name]
                 out[name]["likelihood"] = est.likelihood_name
@@ -225,7 +231,7 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
 
         out["route_table"] = {"drones": int(k), "default": table["default"],
                               "route_settings": route_knobs(settings, est),
-                              "rows": {n: _row(r) for n, r in table["rows"].items()}}
+                              "rows": {n: trimmed_row(r) for n, r in table["rows"].items()}}
     if specimens:  # drones like a user's: the table's routes, or the amortized route alone without a table
         s_seed = child_seed(seed, "specimens") if specimen_seed is None else specimen_seed
         out["specimens"] = specimen_table(est, specimens, settings=route_settings, seed=s_seed, workers=workers,
@@ -263,11 +269,33 @@ def name_default_route(sbc: dict) -> None:
 
 
 def sampled_routes(est: AmortizedEstimator) -> tuple[str, ...]:
-    """The routes a route table compares for this file: all of them (the smc route on
-    the summary likelihood where the file has one, on the likelihood ratio otherwise)."""
+    """The routes a route table compares for this file: all it has (the smc route on the
+    summary likelihood where the file has one, on the likelihood ratio otherwise; the
+    stacked route where it states a stacking weight)."""
     from .amortized.estimator import ROUTES
 
-    return ROUTES
+    return tuple(r for r in ROUTES if r != "stacked" or est.stacking_weight is not None)
+
+
+def runs_for(est: AmortizedEstimator, wanted: tuple[str, ...]) -> tuple[str, ...]:
+    """The routes that run for a table of ``wanted`` routes: the stacked route is no run of
+    its own but derived from the smc and amortized runs on the same drones
+    (:func:`add_stacked`), so it brings them both."""
+    for name in wanted:
+        est.check_route(name)
+    if "stacked" not in wanted:
+        return wanted
+    return tuple(dict.fromkeys([r for r in wanted if r != "stacked"] + ["amortized", "smc"]))
+
+
+def add_stacked(est: AmortizedEstimator, rows: dict, wanted: tuple[str, ...]) -> None:
+    """Where ``wanted`` holds the stacked route: its row (in place), derived from the full
+    smc and amortized rows of the same drones with the file's stacking weight
+    (:func:`mdaug.inference.diagnostics.stacking.stacked_row`)."""
+    if "stacked" in wanted:
+        from .diagnostics.stacking import stacked_row
+
+        rows["stacked"] = stacked_row(rows["smc"], rows["amortized"], est.stacking_weight)
 
 
 class Route:
@@ -340,12 +368,14 @@ def specimen_table(est: AmortizedEstimator, n: int, *, settings=None, seed: int 
     vectors, profiles = sbc_data(replace(est.spec, near_width=1.0), n, seed, workers)
     truths = lf.quantities(vectors)
     rows = {}
-    for name in routes or sampled_routes(est):
+    wanted = tuple(routes or sampled_routes(est))
+    for name in runs_for(est, wanted):
         route = Route(name, est if estimator_path is None else estimator_path, settings)
-        rows[name] = _row(run(route, truths, profiles, lf.names, seed=seed, to_unbounded=lf.to_unbounded,
-                              progress=progress, desc=f"specimens {name}",
-                              workers=workers if estimator_path is not None else 1))
-    out = {"drones": int(n), "near_width": 1.0, "rows": rows}
+        rows[name] = run(route, truths, profiles, lf.names, seed=seed, to_unbounded=lf.to_unbounded,
+                         progress=progress, desc=f"specimens {name}",
+                         workers=workers if estimator_path is not None else 1)
+    add_stacked(est, rows, wanted)
+    out = {"drones": int(n), "near_width": 1.0, "rows": {name: trimmed_row(r) for name, r in rows.items()}}
     if "smc" in rows:
         from .amortized.tempered import route_knobs
 
@@ -359,10 +389,11 @@ def specimen_table(est: AmortizedEstimator, n: int, *, settings=None, seed: int 
     return out
 
 
-def _row(summary: dict) -> dict:
+def trimmed_row(summary: dict) -> dict:
     """A route table row: the gate's figures, the log score, the widths, convergence, seconds."""
     keep = ("outer_share", "coverage90_range", "tarp_atc", "log_score", "log_score_by", "log_score_gaussian",
-            "width_over_truth", "converged_share", "n_replicates", "verdict", "exact_fail_chance")
+            "width_over_truth", "converged_share", "n_replicates", "verdict", "exact_fail_chance", "weight",
+            "derived_from")
     row = {k: summary[k] for k in keep if k in summary}
     row["seconds_median"] = float(np.median(summary["seconds"]))
     return row

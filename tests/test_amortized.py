@@ -692,6 +692,10 @@ def _rewrite(path, tmp_path, name, change):
     ("moves.zip", lambda m, meta: meta.__setitem__("route_settings", {"route_moves": "yes"}),
      "route_moves must be true or false"),
     ("unknown.zip", lambda m, meta: meta.__setitem__("route_settings", {"ess": 0.9}), "unknown route knob"),
+    ("stack.zip", lambda m, meta: meta.__setitem__("stacking", {"weight": 1.5}),
+     r"field 'stacking.weight' must be a number in \(0, 1\), got 1.5"),
+    ("stackless.zip", lambda m, meta: meta.__setitem__("default_route", "stacked"),
+     "field 'default_route' is 'stacked' but the file has no field 'stacking'"),
 ])
 def test_a_damaged_summary_likelihood_is_refused_by_field(tiny, tmp_path, name, change, text):
     _, path = tiny
@@ -834,6 +838,45 @@ def test_smc_route_on_the_summary_likelihood_reports_its_run_and_status(tiny):
         in res.report()
     assert ("its tempering: ESS share 0.7 a stage, sweeps until a particle has moved with probability 0.9 (at most "
             "20), moves across the golf course off") in res.report()  # the defaults: the file states none
+
+
+def test_the_stacked_route_mixes_the_two_routes_at_the_files_weight(tiny, tmp_path):
+    """A file with a stacking weight has the stacked route: its draws are the smc route's
+    at that share and the amortized posterior's for the rest, the report and the status
+    say so, and its SBC row is derived from the two routes' runs on the same drones; a
+    file without a weight refuses the route by name."""
+    from mdaug.inference.amortized.calibrate import calibrate_amortized
+    from mdaug.inference.estimator_job import estimator_sbc
+    from mdaug.inference.result.status import calibration_status
+    from mdaug.inference.settings import CalibrationSettings
+
+    est, path = tiny
+    _, y = simulate(est.spec, 1, 21)
+    settings = CalibrationSettings(time_budget=20, progress=False).with_plugin("smc", n_particles=200)
+    with pytest.raises(EstimatorError, match="the stacked route needs a stacking weight, and the file .* states none"):
+        calibrate_amortized(y[0], "HELI", acquisition=est.spec.acquisition, estimator=est, route="stacked",
+                            settings=settings)
+    stack = {"weight": 0.7, "drones": 40, "chosen_by": "test"}
+    stacked = AmortizedEstimator.load(_rewrite(path, tmp_path, "stacked.zip", lambda m, meta: meta.update(
+        stacking=stack, default_route="stacked")))
+    assert stacked.stacking_weight == 0.7 and stacked.default_route == "stacked"
+    res = calibrate_amortized(y[0], "HELI", acquisition=est.spec.acquisition, estimator=stacked, settings=settings,
+                              random_state=2, n_draws=4000)
+    d = res.diagnostics
+    assert d["route"] == "stacked" and d["stacked"]["weight"] == 0.7 and d["converged"] == d["smc"]["converged"]
+    assert d["stacked"]["smc_share"] == pytest.approx(0.7, abs=0.03) and res.draws().shape == (4000, 13)
+    status = calibration_status(res)
+    assert status.route == "stacked" and status.route_words.startswith(
+        "stacked: 0.70 x tempered SMC from the amortized posterior on the estimator's summary likelihood + 0.30 x")
+    text = res.report()
+    assert "stacked route: 0.70 x the smc route's posterior + 0.30 x the amortized posterior" in text
+    assert "(stacked in the route used)" in text and "on 40 held-out simulated drones" in text
+    out = estimator_sbc(stacked, 3, seed=4, route_truths=3, routes=("amortized", "stacked"),
+                        route_settings=settings, log=lambda m: None)
+    rows = out["route_table"]["rows"]
+    assert set(rows) == {"amortized", "smc", "stacked"}  # the stacked row brings its two runs
+    assert out["stacked"]["derived_from"] == ["smc", "amortized"] and out["stacked"]["weight"] == 0.7
+    assert rows["stacked"]["verdict"] in ("honest", "overconfident") and rows["stacked"]["n_replicates"] == 3
 
 
 def test_the_smc_route_runs_with_the_files_knobs_unless_the_settings_set_them(tiny, tmp_path):

@@ -71,8 +71,9 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
     settings = settings if settings is not None else CalibrationSettings()
     est = estimator if isinstance(estimator, AmortizedEstimator) else find(ref.name, acquisition, radar, path=estimator)
     route = est.default_route if route is None else route
+    est.check_route(route, source)
     fit_smc = fit and route == "amortized" and est.summary is not None
-    sampled = route if route != "amortized" else ("smc" if check or fit_smc else None)  # the sampler that runs
+    sampled = "smc" if route != "amortized" or check or fit_smc else None  # the sampler that runs
     data, shifts = prepare_measured(profiles, radar, "peak", what=f"{source} of class {ref.name}")
     est.check_data(data, acquisition, radar, source)
     lf = est.label_free
@@ -84,7 +85,7 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
         raise EstimatorError(f"{source}: {exc}") from None
     t_amortized = time.perf_counter() - t0
     x_amortized, _ = lf.vectors(lf.from_unbounded(u))
-    diag = {"sampler": "amortized" if route == "amortized" else route, "route": route,
+    diag = {"sampler": "amortized" if route == "amortized" else "smc", "route": route,
             "amortized_seconds": t_amortized, "amortized_inside_prior": float(inside),
             "estimator": _estimator_info(est), "check": bool(check),
             "best_fit_from": "smc" if (sampled == "smc" and est.summary is not None) else route}
@@ -111,12 +112,18 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
     typical = est.meta.get("sbc", {}).get("amortized", {}).get("inside_prior_share", 1.0)
     diag["out_of_range"], diag["out_of_range_why"] = _out_of_range(lf, x_amortized, x_sampled, inside, typical)
     chosen = x_amortized if route == "amortized" else x_sampled
-    diag["widths"] = _widths(lf, chosen, diag.get(route, {}).get("crb", {}) if route != "amortized" else {})
+    if route == "stacked":  # the file's mixture of the two routes (.stacked)
+        from .stacked import mix_draws
+
+        w = est.stacking_weight
+        chosen, share = mix_draws(x_sampled, x_amortized, w, n_draws, np.random.default_rng(child_seed(ss, "stack")))
+        diag["stacked"] = {"weight": w, "smc_share": share, "stacking": dict(est.meta["stacking"])}
+    diag["widths"] = _widths(lf, chosen, diag["smc"].get("crb", {}) if route != "amortized" else {})
     if route == "amortized":
         diag.update(converged=True, reason="amortized posterior: exact draws from the trained estimator "
                     f"(SBC in the estimator file: {_sbc_line(est, 'amortized')})")
     else:
-        diag.update(converged=diag[route]["converged"], reason=diag[route]["reason"])
+        diag.update(converged=diag["smc"]["converged"], reason=diag["smc"]["reason"])
     if diag["out_of_range"]:
         warnings.warn(f"{source}: {diag['out_of_range_why']}", stacklevel=2)
     other = None if not check else (x_sampled if route == "amortized" else x_amortized)

@@ -33,12 +33,14 @@ FORMAT = "mdaug-estimator-1"
 MEMBERS = ("meta.json", "posterior.pt", "ratio.pt")
 SUMMARY_MEMBER = "summary.pt"
 """Optional member: the summary likelihood's weights (with meta field 'summary')."""
-ROUTES = ("amortized", "smc")
-"""The routes of a calibration: the amortized posterior's exact draws, or tempered SMC
+ROUTES = ("amortized", "smc", "stacked")
+"""The routes of a calibration: the amortized posterior's exact draws, tempered SMC
 from the amortized posterior to the posterior of the file's likelihood (the summary
-likelihood where the file has one, else the ratio network's; :mod:`.tempered`).
-(nlopt + emcee started from the amortized draws lost to both on every row of the
-route tables, docs/calibration.md, and left the package.)"""
+likelihood where the file has one, else the ratio network's; :mod:`.tempered`), or the
+two stacked: the mixture w smc + (1 - w) amortized, w the file's stacking weight (meta
+field ``stacking``, :mod:`mdaug.inference.diagnostics.stacking`; only a file that states
+one has this route). (nlopt + emcee started from the amortized draws lost to both on
+every row of the route tables, docs/calibration.md, and left the package.)"""
 MAX_TEMPERATURE = 4.0
 """Largest flow temperature a file may state (a posterior four times wider than trained
 says little more than the prior; :mod:`mdaug.inference.temperature` searches 1-2)."""
@@ -79,6 +81,25 @@ class AmortizedEstimator:
         by its route table: the best log score among the routes that pass SBC), else
         the amortized posterior."""
         return self.meta.get("default_route", "amortized")
+
+    @property
+    def stacking_weight(self) -> float | None:
+        """The smc route's weight in the stacked route (meta field ``stacking.weight``,
+        chosen by the log score of the truth on held-out drones,
+        :func:`mdaug.inference.diagnostics.stacking.stacking_weight`), or None: the file has
+        no stacked route."""
+        st = self.meta.get("stacking")
+        return None if not st else float(st["weight"])
+
+    def check_route(self, route: str, source: str = "the estimator") -> None:
+        """ValueError naming ``source`` unless this file has ``route`` (one of :data:`ROUTES`;
+        'stacked' only with a stacking weight)."""
+        if route not in ROUTES:
+            raise ValueError(f"route must be one of {', '.join(ROUTES)}, got {route!r}")
+        if route == "stacked" and self.stacking_weight is None:
+            raise EstimatorError(f"{source}: the stacked route needs a stacking weight, and the file (class "
+                                 f"{self.class_name}, K = {self.spec.acquisition.ramps}) states none (meta field "
+                                 "'stacking'); use --route smc or amortized")
 
     @property
     def temperature(self) -> float:
@@ -362,6 +383,7 @@ def _summary(meta: dict, state: dict | None, est: AmortizedEstimator, src: str):
     if route not in ROUTES:
         raise EstimatorError(f"{src}: meta.json field 'default_route' is {route!r}; expected one of {', '.join(ROUTES)}")
     check_route_settings(meta, src)
+    check_stacking(meta, src)
     if state is None and "summary" not in meta:
         return None
     if state is None or "summary" not in meta:
@@ -390,6 +412,19 @@ def check_route_settings(meta: dict, src: str) -> None:
         check_route_knobs(knobs, where="meta.json field 'route_settings'")
     except ValueError as exc:
         raise EstimatorError(f"{src}: {exc}") from None
+
+
+def check_stacking(meta: dict, src: str) -> None:
+    """Refuse a meta field ``stacking`` without a weight in (0, 1), and a default route
+    'stacked' without the field, naming the file and the field."""
+    st = meta.get("stacking")
+    if st is not None:
+        w = st.get("weight") if isinstance(st, dict) else None
+        if isinstance(w, bool) or not isinstance(w, (int, float)) or not np.isfinite(w) or not 0 < w < 1:
+            raise EstimatorError(f"{src}: meta.json field 'stacking.weight' must be a number in (0, 1), got {w!r}")
+    elif meta.get("default_route") == "stacked":
+        raise EstimatorError(f"{src}: meta.json field 'default_route' is 'stacked' but the file has no field "
+                             "'stacking' (the weight of its smc route)")
 
 
 # ---- reading a file as untrusted input -------------------------------------------------------------

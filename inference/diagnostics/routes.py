@@ -121,8 +121,9 @@ def headline(summary: dict) -> str:
     """One line: outer share, 90% coverage range, pooled p, TARP."""
     lo, hi = summary["coverage90_range"]
     return (f"outer-10% share {summary['outer_share']:.3f} (honest 0.10), 90% coverage {lo:.2f}-{hi:.2f}, "
-            f"rank chi-square pooled p {summary['pooled_p']:.3g}, TARP ATC {summary['tarp_atc']:.3f} "
-            f"(KS p {summary['tarp_ks_p']:.2f}), "
+            f"rank chi-square pooled p {summary['pooled_p']:.3g}, "
+            + (f"TARP ATC {summary['tarp_atc']:.3f} (KS p {summary['tarp_ks_p']:.2f}), "
+               if np.isfinite(summary.get("tarp_atc", np.nan)) else "")
             + (f"log score {summary['log_score']:.2f}{score_by(summary)}, " if "log_score" in summary else "")
             + f"{summary['n_replicates']} truths" + noise_note(summary["n_replicates"], len(summary.get("names") or [])))
 

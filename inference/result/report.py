@@ -92,7 +92,7 @@ def amortized_report(res, identified_ratio: float) -> str:
         m = d["smc"]
         which = {"summary": "the summary likelihood", "ratio": "the learned likelihood ratio"}.get(
             m.get("likelihood", "ratio"), "the learned likelihood")
-        role = "the route used" if d["route"] == "smc" else smc_role(d)
+        role = {"smc": "the route used", "stacked": "stacked in the route used"}.get(d["route"]) or smc_role(d)
         lines.append(f"tempered SMC from the amortized posterior on {which} ({role}): "
                      f"{m['particles']} particles, {m['stages']} stages ({m['seconds']:.1f} s), unique share "
                      f"{m['unique_share']:.2f}, last acceptance {m['acceptance_last']:.2f}: "
@@ -100,6 +100,12 @@ def amortized_report(res, identified_ratio: float) -> str:
         if "route_settings" in m:  # results of earlier releases have none
             k = m["route_settings"]
             lines.append("  its tempering: " + describe_route_knobs(k, particles=False))
+    if d["route"] == "stacked":
+        st = d["stacked"]
+        lines.append(f"stacked route: {st['weight']:.2f} x the smc route's posterior + {1 - st['weight']:.2f} x the "
+                     f"amortized posterior ({st['smc_share']:.0%} of the draws from the smc route); the weight is the "
+                     "file's, chosen by the log score of the truth on "
+                     f"{st['stacking'].get('drones', '?')} held-out simulated drones")
     lines.append(f"posterior used by the strategies: {d['route']} route"
                  + (f"; best fit (sigma_p_fit's centre): {BEST_FIT_BESIDE}" if best_fit_beside(d) else "")
                  + ("; best fit: the component-wise median of the draws (no labelling of their label-free "

@@ -118,7 +118,7 @@ class CalibrationStatus:
     words every place prints (module doc)."""
 
     route: str
-    """'amortized', 'smc' or 'likelihood' ('emcee' in files of releases before the smc route)."""
+    """'amortized', 'smc', 'stacked' or 'likelihood' ('emcee' in files of releases before the smc route)."""
     route_words: str
     """How the posterior was drawn, e.g. "tempered SMC from the amortized posterior on the estimator's summary likelihood"."""
     converged: bool
@@ -288,9 +288,12 @@ def calibration_status(source) -> CalibrationStatus:
         if other:
             check = (other, *chain_words(bool(d[other].get("converged")), d[other].get("reason", "")))
     else:
-        m = d.get(route, {})
-        how = "tempered SMC from the amortized posterior" if route == "smc" else "nlopt + emcee"
+        m = d.get("smc" if route == "stacked" else route, {})
+        how = "tempered SMC from the amortized posterior" if route in ("smc", "stacked") else "nlopt + emcee"
         words = f"{how} on {_LIKELIHOODS.get(m.get('likelihood', 'ratio'), 'the learned likelihood')}"
+        if route == "stacked":  # the file's mixture of its two routes
+            w = (d.get("stacked") or {}).get("weight", float("nan"))
+            words = f"stacked: {w:.2f} x {words} + {1 - w:.2f} x the amortized posterior"
         convergence, detail = chain_words(bool(d["converged"]), d.get("reason", ""))
     sbc = ((d.get("estimator") or {}).get("sbc") or {}).get(route) if amortized else None
     if sbc and sbc.get("outer_share") is not None and sbc.get("coverage90_range"):

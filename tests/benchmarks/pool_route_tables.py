@@ -12,6 +12,9 @@ The smc route's per-quantity coverage is stored in each file (``sbc.smc``); the 
 is not (its rows keep the range only), so it is rerun on each file's drones (``sbc_data`` with
 that run's count, seed and workers; milliseconds a drone). Prints one row per route with its
 lowest coverages and the chance that an exact posterior's lowest coverage falls that low.
+--stack-weight W adds the stacked route (W x smc + (1 - W) x amortized, its row derived from the two
+routes' runs on the same drones); --fit-stacking OUT fits W on the pooled drones by the truth's log
+score and writes a copy of the first FILE that states it (meta field 'stacking').
 """
 from __future__ import annotations
 
@@ -40,7 +43,8 @@ def _pool(parts: list[dict], names: list[str]) -> dict:
 
     n = sum(p["n_replicates"] for p in parts)
     cov = {q: sum(p["coverage_by_quantity"][q]["0.90"] * p["n_replicates"] for p in parts) / n for q in names}
-    row = {k: sum(p[k] * p["n_replicates"] for p in parts) / n for k in ("outer_share", "log_score", "tarp_atc")}
+    row = {k: sum(p.get(k, float("nan")) * p["n_replicates"] for p in parts) / n
+           for k in ("outer_share", "log_score", "tarp_atc")}  # a stacked row has no TARP (its draws are not kept)
     row.update(coverage90_range=[min(cov.values()), max(cov.values())], n_replicates=n,
                lowest=sorted(cov.items(), key=lambda t: t[1])[:4], exact_fail_chance=exact_fail_chance(n, len(names)))
     row["verdict"] = verdict(row)
@@ -57,7 +61,20 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="+", type=_run, metavar="FILE:SEED:WORKERS")
+    ap.add_argument("--stack-weight", type=float, default=None,
+                    help="also pool the stacked route at this weight of the smc route (derived from the two routes' "
+                         "runs on each file's drones: mdaug.inference.diagnostics.stacking.stacked_row)")
+    ap.add_argument("--adopt", default=None, metavar="OUT",
+                    help="with one FILE and --stack-weight: write a copy of FILE whose route table holds the stacked "
+                         "row beside its own, states the weight (meta field 'stacking') and names its default route "
+                         "on these prior drones (its specimen table dropped: rerun it with summary_likelihood.py "
+                         "--from-file OUT --route-truths 0 --specimens N, which then names the default there)")
+    ap.add_argument("--fit-stacking", default=None, metavar="OUT",
+                    help="fit the stacking weight on the pooled drones (the truth's log score of the mixture, "
+                         "stacking_weight) and write a copy of the first FILE that states it (meta field 'stacking')")
     a = ap.parse_args(argv)
+    if a.adopt and (len(a.runs) != 1 or a.stack_weight is None):
+        ap.error("--adopt takes one FILE and --stack-weight")
     torch.set_num_threads(1)
     metas = [json.loads(zipfile.ZipFile(path).read("meta.json")) for path, _, _ in a.runs]
     est = AmortizedEstimator.load(a.runs[0][0])
@@ -71,12 +88,51 @@ def main(argv=None) -> int:
     rows = {"amortized": _pool(amortized, lf.names)}
     if all("smc" in m["sbc"] for m in metas):
         rows["smc"] = _pool([m["sbc"]["smc"] for m in metas], lf.names)
+    if a.stack_weight is not None or a.fit_stacking:
+        import numpy as np
+
+        from mdaug.inference.diagnostics.stacking import stacked_row, stacking_weight
+
+        log_smc = np.concatenate([m["sbc"]["smc"]["log_score_by_drone"] for m in metas])
+        log_amortized = np.concatenate([r["log_score_by_drone"] for r in amortized])
+        w = a.stack_weight if a.stack_weight is not None else stacking_weight(-log_smc, -log_amortized)
+        stacked = [stacked_row(m["sbc"]["smc"], r, w) for m, r in zip(metas, amortized)]
+        rows["stacked"] = _pool(stacked, lf.names)
+        print(f"stacking weight of the smc route: {w:.3f}" + (" (given)" if a.stack_weight is not None else
+              f" (fitted: the truth's log score on the {len(log_smc)} pooled drones)"))
+        if a.fit_stacking:
+            import sys
+
+            est.meta["stacking"] = {
+                "weight": round(w, 3), "drones": int(len(log_smc)), "seeds": [seed for _, seed, _ in a.runs],
+                "log_score": {"smc": float(log_smc.mean()), "amortized": float(log_amortized.mean()),
+                              "stacked": rows["stacked"]["log_score"]},
+                "chosen_by": "the log score of the truth of the mixture on these prior drones (stacking, Yao et al. "
+                             "2018), route tables of summary_likelihood.py at the file's route settings",
+                "command": "python tests/benchmarks/pool_route_tables.py " + " ".join(sys.argv[1:])}
+            est.save(a.fit_stacking)
+            print(f"wrote {a.fit_stacking} (its default route unchanged: {est.default_route}; a route table on "
+                  "other drones names it)")
+    if a.adopt:
+        from mdaug.inference.estimator_job import adopt_route_table, name_default_route, trimmed_row
+
+        sbc = est.meta["sbc"]
+        sbc["stacked"] = stacked[0]
+        sbc["route_table"]["rows"]["stacked"] = trimmed_row(stacked[0])
+        sbc.pop("specimens", None)  # its rows have no stacked route: rerun them
+        name_default_route(sbc)
+        est.meta["stacking"] = {"weight": w, **{k: v for k, v in (est.meta.get("stacking") or {}).items()
+                                                 if k != "weight"}}
+        adopt_route_table(est)
+        est.save(a.adopt)
+        print(f"wrote {a.adopt}: default route {est.default_route} ({sbc['route_table']['default_by']})")
     d = len(lf.names)
     print(f"{len(a.runs)} route tables pooled, {rows['amortized']['n_replicates']} fresh prior drones, "
           f"{est.class_name} K = {est.spec.acquisition.ramps}, {d} quantities:")
     for name, r in rows.items():
         lo, hi = r["coverage90_range"]
-        p_low = lowest_coverage_chance(r["n_replicates"], d, lo)  # an exact posterior this low
+        # an exact posterior this low (the stacked row's interval is its CDF's, not 199 draws')
+        p_low = lowest_coverage_chance(r["n_replicates"], d, lo, n_draws=10 ** 6 if name == "stacked" else 199)
         print(f"{name:10s} {r['verdict']:13s} outer {r['outer_share']:.3f}  coverage {lo:.3f}-{hi:.3f}  log score "
               f"{r['log_score']:.2f}  TARP {r['tarp_atc']:.3f}  lowest: "
               + ", ".join(f"{q} {v:.3f}" for q, v in r["lowest"])

@@ -44,7 +44,8 @@ def table(rows: dict, names: list[str], crb: dict | None = None) -> str:
         lines.append(f"{name:10s} {r.get('verdict', ''):13s} {r['outer_share']:6.3f} {lo:4.2f}-{hi:4.2f} "
                      f"{r['log_score']:8.2f}{'*' if r.get('log_score_by') == 'exact' else ' '} "
                      f"{r['converged_share']:5.2f} {r['seconds_median']:7.1f}  "
-                     + " ".join(f"{r['width_over_truth'][n]:.2f}" for n in names))
+                     + (" ".join(f"{r['width_over_truth'][n]:.2f}" for n in names) if "width_over_truth" in r else
+                        "(derived from the smc and amortized rows: no draws to measure)"))
     if crb:
         lines.append(f"{'CRB':10s} {'':13s} {'':6s} {'':10s} {'':9s} {'':5s} {'':7s}  "
                      + " ".join(f"{crb[n]:.2f}" for n in names))
@@ -133,7 +134,7 @@ def main(argv=None) -> int:
     routes = tuple(a.routes.split(",")) if a.routes else None
     old = est.meta.get("sbc", {})
     # with --from-file the file's model is unchanged: a part not rerun here is kept
-    keep = ("amortized", "n_measurements") + (("route_table", "smc", "specimens") if a.from_file else ())
+    keep = ("amortized", "n_measurements") + (("route_table", "smc", "stacked", "specimens") if a.from_file else ())
     new = {k: v for k, v in old.items() if k in keep}
     if a.route_truths:
         sbc = estimator_sbc(est, a.route_truths, seed=a.seed, workers=a.workers, route_truths=a.route_truths,
