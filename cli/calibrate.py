@@ -328,8 +328,8 @@ def add_calibrate(sub, parents, help):
     g.add_argument("--route", choices=ROUTES, default=None,
                    help="amortized: the estimator's posterior (exact draws, milliseconds); smc: tempered SMC "
                         "from the amortized posterior to the posterior of the estimator's likelihood (the summary "
-                        "likelihood where it has one; weights between its modes) (default: the estimator's "
-                        "default route)")
+                        "likelihood where it has one; weights between its modes); stacked: the two mixed at the "
+                        "file's stacking weight (files that state one) (default: the estimator's default route)")
     g.add_argument("--route-knob", action="append", type=route_knob_arg, default=None, metavar="NAME=VALUE",
                    help="one of the smc route's knobs, over the estimator file's own (its meta field "
                         "route_settings) and the defaults: route_ess (ESS share kept a tempering stage), "

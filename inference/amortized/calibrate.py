@@ -1,11 +1,13 @@
 """calibrate_amortized(): measured profiles of one drone -> a CalibrationResult, with no
 training: the class's trained estimator (:mod:`.shipped` or a file).
 
-Two routes (:data:`.estimator.ROUTES`), each judged by the SBC and the route table
-stored in the estimator: the amortized posterior (draws in milliseconds), and
+Three routes (:data:`.estimator.ROUTES`), each judged by the SBC and the route table
+stored in the estimator: the amortized posterior (draws in milliseconds),
 tempered SMC from the amortized posterior to the posterior of the file's likelihood
 (:mod:`.tempered`; the summary likelihood of :mod:`mdaug.inference.emulator` where
-the file has one, else the ratio network's, :mod:`.ratio_posterior`). ``route`` None
+the file has one, else the ratio network's, :mod:`.ratio_posterior`), and, where the
+file states a stacking weight w, the two stacked (:mod:`.stacked`: w of the draws from
+the smc route, the rest from the amortized posterior). ``route`` None
 takes the file's default route (named by its route table,
 :func:`mdaug.inference.diagnostics.routes.default_route`); with ``check=True`` the
 other route runs too and lands in the group ``other_route``, with its diagnostics in

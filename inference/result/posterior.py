@@ -253,13 +253,15 @@ class CalibrationResult:
         return x.reshape(n, e * N_PARAMS)
 
     def route_draws(self, route: str) -> np.ndarray:
-        """Draws (n, 13E) of one route of an amortized calibration ('amortized' or 'smc'):
-        the posterior's where it is the route used, else the ``other_route`` group's,
-        which holds the route not used (kept with ``check=True``)."""
+        """Draws (n, 13E) of one route of an amortized calibration ('amortized', 'smc' or
+        'stacked'): the posterior's where it is the route used, else the ``other_route``
+        group's, which holds the other route (kept with ``check=True``): the smc route's
+        beside the amortized route, the amortized posterior's beside the smc or stacked route."""
         used = self.diagnostics.get("route")
         if route == used:
             return self.draws()
-        if route in ("amortized", "smc") and used in ("amortized", "smc") and "other_route" in self.groups:
+        other = {"amortized": "smc", "smc": "amortized", "stacked": "amortized"}.get(used)
+        if route == other and "other_route" in self.groups:
             return self.draws(group="other_route")
         kept = f"the {used} route's" + (" and the other route's" if "other_route" in self.groups else "")
         raise ValueError(f"route {route!r}: this result holds {kept} draws only")
