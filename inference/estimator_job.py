@@ -217,9 +217,11 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
         table = route_table(routes, truths[:k], profiles[:k], lf.names, to_unbounded=lf.to_unbounded, seed=seed,
                             progress=progress, workers=workers if estimator_path is not None else 1)
         add_stacked(est, table["rows"], wanted)
-        if "stacked" in wanted:
+        if "stacked" in wanted:  # judged by the gate beside the routes that ran
             from .diagnostics.routes import default_route
+            from .diagnostics.yardsticks import verdict
 
+            table["rows"]["stacked"]["verdict"] = verdict(table["rows"]["stacked"])
             table["default"] = default_route(table["rows"])
         for name in table["rows"]:
             if name != "amortized":

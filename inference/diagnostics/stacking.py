@@ -58,8 +58,9 @@ def stacked_row(row_a: dict, row_b: dict, weight: float, sources: tuple[str, str
     per drone (both routes'). Widths and TARP need the draws, which the rows do not keep:
     the row has neither.
     sources: the two routes' names, kept in the row (``derived_from``)."""
+    from scipy import stats
+
     from ..result.status import exact_fail_chance
-    from .yardsticks import verdict
 
     if not 0.0 < weight < 1.0:
         raise ValueError(f"weight must be in (0, 1), got {weight!r}")
@@ -80,20 +81,17 @@ def stacked_row(row_a: dict, row_b: dict, weight: float, sources: tuple[str, str
     outer = (f < 0.05) | (f > 0.95)
     ls = -mixture_log_density(-np.asarray(row_a["log_score_by_drone"]), -np.asarray(row_b["log_score_by_drone"]),
                               weight)
-    from scipy import stats
-
     counts = np.stack([np.histogram(f[:, j], bins=np.linspace(0, 1, 6))[0] for j in range(f.shape[1])])
     chi2 = ((counts - len(f) / 5) ** 2 / (len(f) / 5)).sum(axis=1)  # F's histogram, as the ranks' (sbc.summarise)
     cov90 = [v["0.90"] for v in per.values()]
-    sa, sb = np.asarray(row_a["seconds"], float), np.asarray(row_b["seconds"], float)
-    row = {"names": names, "n_rank": n, "n_replicates": int(len(f)), "weight": float(weight),
-           "pooled_p": float(stats.chi2.sf(chi2.sum(), 4 * len(chi2))), "outer_share": float(outer.mean()), "outer_share_by_quantity": dict(zip(names, map(float, outer.mean(0)))),
-           "coverage": pooled, "coverage_by_quantity": per, "coverage90_range": [min(cov90), max(cov90)],
-           "log_score": float(np.mean(ls)), "log_score_median": float(np.median(ls)),
-           "log_score_by_drone": ls.tolist(), "log_score_by": "exact",
-           "converged_share": float(row_a["converged_share"]), "seconds": (sa + sb).tolist(),
-           # the interval of the mixture's CDF, not of draws: an exact posterior's coverage is 0.90
-           "exact_fail_chance": exact_fail_chance(len(f), len(names), n_draws=10**6),
-           "derived_from": list(sources)}
-    row["verdict"] = verdict(row)
-    return row
+    seconds = np.asarray(row_a["seconds"], float) + np.asarray(row_b["seconds"], float)
+    return {"names": names, "n_rank": n, "n_replicates": int(len(f)), "weight": float(weight),
+            "pooled_p": float(stats.chi2.sf(chi2.sum(), 4 * len(chi2))), "outer_share": float(outer.mean()),
+            "outer_share_by_quantity": dict(zip(names, map(float, outer.mean(0)))),
+            "coverage": pooled, "coverage_by_quantity": per, "coverage90_range": [min(cov90), max(cov90)],
+            "log_score": float(np.mean(ls)), "log_score_median": float(np.median(ls)),
+            "log_score_by_drone": ls.tolist(), "log_score_by": "exact",
+            "converged_share": float(row_a["converged_share"]), "seconds": seconds.tolist(),
+            # the interval of the mixture's CDF, not of 199 draws: an exact posterior's coverage is 0.90
+            "exact_fail_chance": exact_fail_chance(len(f), len(names), n_draws=10 ** 6),
+            "derived_from": list(sources)}

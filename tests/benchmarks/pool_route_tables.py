@@ -117,8 +117,10 @@ def main(argv=None) -> int:
         from mdaug.inference.estimator_job import adopt_route_table, name_default_route, trimmed_row
 
         sbc = est.meta["sbc"]
-        sbc["stacked"] = stacked[0]
-        sbc["route_table"]["rows"]["stacked"] = trimmed_row(stacked[0])
+        from mdaug.inference.diagnostics.yardsticks import verdict
+
+        sbc["stacked"] = {**stacked[0], "verdict": verdict(stacked[0])}
+        sbc["route_table"]["rows"]["stacked"] = trimmed_row(sbc["stacked"])
         sbc.pop("specimens", None)  # its rows have no stacked route: rerun them
         name_default_route(sbc)
         est.meta["stacking"] = {"weight": w, **{k: v for k, v in (est.meta.get("stacking") or {}).items()
