@@ -199,7 +199,7 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
     space = est.spec.space()
     prior_q = lf.quantities(space.vectors(space.sample_prior(4000, np.random.default_rng(seed_sequence(seed, "prior")))))
 
-    accepted = []
+    accepted, wanted = [], None
     out = {"n_measurements": int(profiles.shape[1]),
            "amortized": run_sbc(amortized_draw(est, accepted), truths, profiles, lf.names, prior_q=prior_q, seed=seed,
                                 to_unbounded=lf.to_unbounded, progress=progress, desc="SBC amortized")}
@@ -238,7 +238,7 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
         s_seed = child_seed(seed, "specimens") if specimen_seed is None else specimen_seed
         out["specimens"] = specimen_table(est, specimens, settings=route_settings, seed=s_seed, workers=workers,
                                           estimator_path=estimator_path, progress=progress,
-                                          routes=tuple(routes) if route_truths else ("amortized",))
+                                          routes=wanted if route_truths else ("amortized",))
     if route_truths:
         name_default_route(out)
         log(f"  route table on {k} drones: default route {out['route_table']['default']} "

@@ -872,9 +872,9 @@ def test_the_stacked_route_mixes_the_two_routes_at_the_files_weight(tiny, tmp_pa
     assert "stacked route: 0.70 x the smc route's posterior + 0.30 x the amortized posterior" in text
     assert "(stacked in the route used)" in text and "on 40 held-out simulated drones" in text
     out = estimator_sbc(stacked, 3, seed=4, route_truths=3, routes=("amortized", "stacked"),
-                        route_settings=settings, log=lambda m: None)
+                        route_settings=settings, log=lambda m: None, specimens=2)
     rows = out["route_table"]["rows"]
-    assert set(rows) == {"amortized", "smc", "stacked"}  # the stacked row brings its two runs
+    assert set(rows) == set(out["specimens"]["rows"]) == {"amortized", "smc", "stacked"}  # it brings its two runs
     assert out["stacked"]["derived_from"] == ["smc", "amortized"] and out["stacked"]["weight"] == 0.7
     assert rows["stacked"]["verdict"] in ("honest", "overconfident") and rows["stacked"]["n_replicates"] == 3
 
