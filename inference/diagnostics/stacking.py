@@ -24,6 +24,12 @@ import numpy as np
 from ..amortized.stacked import mixture_log_density
 from .routes import LEVELS
 
+CDF_DRAWS = 10 ** 6
+"""The draws a stacked row's intervals stand for (``n_draws`` of
+:func:`mdaug.inference.result.status.exact_fail_chance`): they come from the mixture's CDF,
+not from 199 draws, so an exact posterior's 90% coverage is 0.90 (module doc)."""
+
+
 def stacking_weight(log_p_a: np.ndarray, log_p_b: np.ndarray) -> float:
     """The weight w in [0, 1] of route a that maximises mean log(w p_a + (1 - w) p_b) of the
     truth over drones (log_p_a, log_p_b (R,): each route's log density at each drone's
@@ -41,7 +47,7 @@ def stacking_weight(log_p_a: np.ndarray, log_p_b: np.ndarray) -> float:
 
     def loss(w):
         with np.errstate(divide="ignore"):
-            return -np.mean(top + np.log(w * np.exp(a - top) + (1 - w) * np.exp(b - top)))
+            return -np.mean(mixture_log_density(a, b, w))
 
     ends = {0.0: loss(0.0), 1.0: loss(1.0)}
     res = minimize_scalar(loss, bounds=(0.0, 1.0), method="bounded", options={"xatol": 1e-4})
@@ -92,6 +98,5 @@ def stacked_row(row_a: dict, row_b: dict, weight: float, sources: tuple[str, str
             "log_score": float(np.mean(ls)), "log_score_median": float(np.median(ls)),
             "log_score_by_drone": ls.tolist(), "log_score_by": "exact",
             "converged_share": float(row_a["converged_share"]), "seconds": seconds.tolist(),
-            # the interval of the mixture's CDF, not of 199 draws: an exact posterior's coverage is 0.90
-            "exact_fail_chance": exact_fail_chance(len(f), len(names), n_draws=10 ** 6),
+            "exact_fail_chance": exact_fail_chance(len(f), len(names), n_draws=CDF_DRAWS),
             "derived_from": list(sources)}

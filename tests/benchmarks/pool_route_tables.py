@@ -37,8 +37,9 @@ def _run(text: str) -> tuple[str, int, int]:
         raise argparse.ArgumentTypeError(f"{text!r}: expected FILE:SEED:WORKERS") from None
 
 
-def _pool(parts: list[dict], names: list[str]) -> dict:
-    """Pooled figures of SBC summaries ``parts`` (each with n_replicates and coverage_by_quantity)."""
+def _pool(parts: list[dict], names: list[str], n_draws: int = 199) -> dict:
+    """Pooled figures of SBC summaries ``parts`` (each with n_replicates and coverage_by_quantity);
+    n_draws: the draws their intervals stand for (a stacked row's: its CDF's, ``CDF_DRAWS``)."""
     from mdaug.inference.result.status import exact_fail_chance, verdict
 
     n = sum(p["n_replicates"] for p in parts)
@@ -46,7 +47,8 @@ def _pool(parts: list[dict], names: list[str]) -> dict:
     row = {k: sum(p.get(k, float("nan")) * p["n_replicates"] for p in parts) / n
            for k in ("outer_share", "log_score", "tarp_atc")}  # a stacked row has no TARP (its draws are not kept)
     row.update(coverage90_range=[min(cov.values()), max(cov.values())], n_replicates=n,
-               lowest=sorted(cov.items(), key=lambda t: t[1])[:4], exact_fail_chance=exact_fail_chance(n, len(names)))
+               lowest=sorted(cov.items(), key=lambda t: t[1])[:4],
+               exact_fail_chance=exact_fail_chance(n, len(names), n_draws), n_draws=n_draws)
     row["verdict"] = verdict(row)
     return row
 
@@ -91,13 +93,13 @@ def main(argv=None) -> int:
     if a.stack_weight is not None or a.fit_stacking:
         import numpy as np
 
-        from mdaug.inference.diagnostics.stacking import stacked_row, stacking_weight
+        from mdaug.inference.diagnostics.stacking import CDF_DRAWS, stacked_row, stacking_weight
 
         log_smc = np.concatenate([m["sbc"]["smc"]["log_score_by_drone"] for m in metas])
         log_amortized = np.concatenate([r["log_score_by_drone"] for r in amortized])
         w = a.stack_weight if a.stack_weight is not None else stacking_weight(-log_smc, -log_amortized)
         stacked = [stacked_row(m["sbc"]["smc"], r, w) for m, r in zip(metas, amortized)]
-        rows["stacked"] = _pool(stacked, lf.names)
+        rows["stacked"] = _pool(stacked, lf.names, CDF_DRAWS)
         print(f"stacking weight of the smc route: {w:.3f}" + (" (given)" if a.stack_weight is not None else
               f" (fitted: the truth's log score on the {len(log_smc)} pooled drones)"))
         if a.fit_stacking:
@@ -115,10 +117,9 @@ def main(argv=None) -> int:
                   "other drones names it)")
     if a.adopt:
         from mdaug.inference.estimator_job import adopt_route_table, name_default_route, trimmed_row
+        from mdaug.inference.result.status import verdict
 
         sbc = est.meta["sbc"]
-        from mdaug.inference.diagnostics.yardsticks import verdict
-
         sbc["stacked"] = {**stacked[0], "verdict": verdict(stacked[0])}
         sbc["route_table"]["rows"]["stacked"] = trimmed_row(sbc["stacked"])
         sbc.pop("specimens", None)  # its rows have no stacked route: rerun them
@@ -133,8 +134,7 @@ def main(argv=None) -> int:
           f"{est.class_name} K = {est.spec.acquisition.ramps}, {d} quantities:")
     for name, r in rows.items():
         lo, hi = r["coverage90_range"]
-        # an exact posterior this low (the stacked row's interval is its CDF's, not 199 draws')
-        p_low = lowest_coverage_chance(r["n_replicates"], d, lo, n_draws=10 ** 6 if name == "stacked" else 199)
+        p_low = lowest_coverage_chance(r["n_replicates"], d, lo, r["n_draws"])  # an exact posterior this low
         print(f"{name:10s} {r['verdict']:13s} outer {r['outer_share']:.3f}  coverage {lo:.3f}-{hi:.3f}  log score "
               f"{r['log_score']:.2f}  TARP {r['tarp_atc']:.3f}  lowest: "
               + ", ".join(f"{q} {v:.3f}" for q, v in r["lowest"])
