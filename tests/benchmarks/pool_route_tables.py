@@ -37,6 +37,12 @@ def _run(text: str) -> tuple[str, int, int]:
         raise argparse.ArgumentTypeError(f"{text!r}: expected FILE:SEED:WORKERS") from None
 
 
+def _tarp(row: dict) -> str:
+    """TARP ATC as printed: '-' for a row without one (a stacked row keeps no draws)."""
+    t = row.get("tarp_atc", float("nan"))
+    return "-" if t != t else f"{t:.3f}"
+
+
 def _pool(parts: list[dict], names: list[str], n_draws: int = 199) -> dict:
     """Pooled figures of SBC summaries ``parts`` (each with n_replicates and coverage_by_quantity);
     n_draws: the draws their intervals stand for (a stacked row's: its CDF's, ``CDF_DRAWS``)."""
@@ -136,7 +142,7 @@ def main(argv=None) -> int:
         lo, hi = r["coverage90_range"]
         p_low = lowest_coverage_chance(r["n_replicates"], d, lo, r["n_draws"])  # an exact posterior this low
         print(f"{name:10s} {r['verdict']:13s} outer {r['outer_share']:.3f}  coverage {lo:.3f}-{hi:.3f}  log score "
-              f"{r['log_score']:.2f}  TARP {r['tarp_atc']:.3f}  lowest: "
+              f"{r['log_score']:.2f}  TARP {_tarp(r)}  lowest: "
               + ", ".join(f"{q} {v:.3f}" for q, v in r["lowest"])
               + f"  (an exact posterior's lowest this low: chance {p_low:.3f})")
     print(f"(an exact posterior fails the gate's coverage rule on {rows['amortized']['n_replicates']} drones with "
