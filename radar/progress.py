@@ -100,5 +100,6 @@ def echo(message: str = "", *, err: bool = False, force: bool = False) -> None:
 
     if getattr(tqdm, "_instances", None):
         tqdm.write(message, file=stream)
-    else:
-        print(message, file=stream, flush=True)
+    else:  # one write of the whole line: workers sharing the terminal do not interleave halves
+        stream.write(f"{message}\n")
+        stream.flush()

@@ -157,14 +157,17 @@ def results_section(results: dict) -> str:
 def _calibration_text(cls: str, v: dict) -> str:
     """One class's calibration in a line: its status in the words of every other place
     (:func:`mdaug.inference.result.status.calibration_status`), the stored SBC, the
-    sampled run where there is one (:func:`~mdaug.inference.result.status.run_facts`),
-    and the route run beside it (for the best fit or as a check)."""
+    sampled run where there is one (:func:`~mdaug.inference.result.status.run_facts`;
+    a stacked route's weight before its smc part's run), and the route run beside it
+    (for the best fit or as a check)."""
     from ..inference.result.status import calibration_status, run_facts
 
     st = calibration_status(v)
     facts = run_facts(v["diagnostics"])
     text = f"{cls} {st.headline}" + (f" ({st.sbc_facts})" if st.sbc else "")
-    if st.route != "amortized":
+    if st.route == "stacked":  # the mixture's weight, then the run of its smc part
+        text += f"; {st.route_words}" + (f"; its smc run: {facts}" if facts else "")
+    elif st.route != "amortized":
         text += f"; {facts}" if facts else ""
     elif st.check:
         text += f"; {st.check}" + (f" ({facts})" if facts else "")

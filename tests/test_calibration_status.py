@@ -28,11 +28,13 @@ def _amortized_diag(route: str, converged: bool, out_of_range: bool = False) -> 
     d = {"sampler": "amortized" if route == "amortized" else "smc", "route": route, "amortized_seconds": 0.02,
          "amortized_inside_prior": 0.97, "seconds": 20.0,
          "estimator": {"class": "QUAD", "ramps": 4, "simulations": 100, "simulator": "scene",
-                       "sbc": {"amortized": HONEST_SBC, "smc": OVERCONFIDENT_SBC}},
+                       "sbc": {"amortized": HONEST_SBC, "smc": OVERCONFIDENT_SBC, "stacked": HONEST_SBC}},
          "smc": smc, "out_of_range": out_of_range,
          "out_of_range_why": ("the two learned posteriors disagree on 2 of 8 quantities: the measurements are unlike "
                               "the estimator's training set") if out_of_range else "",
          "identified": {}, "identified_ratio": 0.5}
+    if route == "stacked":  # the file's mixture: 0.79 x the smc run + 0.21 x the amortized posterior
+        d["stacked"] = {"weight": 0.79, "smc_share": 0.78, "stacking": {"weight": 0.79, "drones": 300}}
     if route == "amortized":
         d.update(converged=True, reason="amortized posterior: exact draws from the trained estimator")
     else:
@@ -97,6 +99,7 @@ CASES = [  # (route, converged, out of range) -> the words every place must prin
     ("amortized", True, False, "amortized route: exact draws; SBC: honest"),
     ("smc", False, True, "smc route: NOT converged; SBC: overconfident; out of range"),
     ("smc", True, False, "smc route: converged; SBC: overconfident"),
+    ("stacked", True, False, "stacked route: converged; SBC: honest"),
 ]
 
 
@@ -133,6 +136,12 @@ def test_terminal_corner_title_and_results_json_say_the_same_words(route, conver
     assert f"QUAD {headline}" in _calibration_text("QUAD", rec)
     if oor:
         assert "out of range: the two learned posteriors disagree" in page and "out of range" in text
+    if route == "stacked":  # the weight in every place, and the README line's smc part after it
+        words = "stacked: 0.79 x tempered SMC from the amortized posterior on "
+        assert words in st.route_words and "0.21 x the amortized posterior" in st.route_words
+        assert "stacked route: 0.79 x the smc route's posterior + 0.21 x the" in text
+        assert words in _calibration_text("QUAD", rec)
+        assert _calibration_text("QUAD", rec).endswith("; its smc run: 3600 particles, 6 stages, distinct share 0.80")
 
 
 def test_honesty_is_the_yardsticks_gate_and_the_rank_test_is_words():
