@@ -200,10 +200,8 @@ def _make_work(args, work: Path) -> Path | None:
 def run_sbc(args) -> int:
     from ..generator.acquisition import Acquisition
     from ..inference.estimator_job import estimator_sbc
-    from ..inference.diagnostics.routes import headline, score_by
     from ..inference.amortized.shipped import find
     from ..inference.settings import CalibrationSettings
-    from ..inference.samplers.smc import describe_route_knobs
     from ..radar.progress import progress_enabled
     from .guard import Output, check_paths
 
@@ -218,32 +216,21 @@ def run_sbc(args) -> int:
     where = "the shipped estimator" if args.estimator is None else f"--estimator {args.estimator}"
     est.check_acquisition(Acquisition.measured(args.ramps), RadarConfig(),  # calibrate's own check of its data
                           f"--ramps {args.ramps} with {where}")
-    settings = CalibrationSettings(progress=False, time_budget=args.time_budget)
-    out = estimator_sbc(est, args.truths, seed=args.seed, workers=args.workers, route_truths=args.route_truths,
-                        route_settings=settings, progress=progress_enabled(), log=info,
-                        specimens=args.specimens)
-    for route, s in out.items():
-        if not isinstance(s, dict) or "coverage90_range" not in s:  # the route table's own record
-            continue
-        result(f"{cls} K={args.ramps} {route}: {headline(s)}")
-        prior = s.get("prior_width_over_truth")  # the amortized route's SBC carries the prior's beside
-        if "width_over_truth" in s:  # a stacked row, derived from two routes' ranks, has no draws to measure
-            widths = " ".join(f"{k.split()[2][0]}{k.split()[1]}{k[-3:]} {v:.2f}" + (f"/{prior[k]:.2f}" if prior else "")
-                              for k, v in s["width_over_truth"].items() if k.startswith("line"))
-            result(f"  median 90% width / truth{' (posterior/prior)' if prior else ''}: {widths}")
-    if "specimens" in out:
-        for route, s in out["specimens"]["rows"].items():
-            widths = " ".join(f"{v:.2f}" for k, v in s.get("width_over_truth", {}).items() if k.startswith("line"))
-            result(f"{cls} K={args.ramps} {route} on {out['specimens']['drones']} specimen drones: log score "
-                   f"{s['log_score']:.2f}{score_by(s)}" + (f", lines' median 90% width / truth {widths}" if widths
-                                                           else ""))
-    if "route_table" in out:
-        t = out["route_table"]
-        result(f"{cls} K={args.ramps} default route: {t['default']} ({t['default_by']})")
-        if "route_settings" in t:
-            k = t["route_settings"]
-            result("  the smc route's knobs (the settings', else the file's, else the defaults): "
-                   + describe_route_knobs(k))
+    if args.stored:  # what the file says, simulating nothing
+        if args.figure is not None:
+            raise ValueError("--figure: the rank histograms need the drones' ranks, which a file does not store; "
+                             "run the SBC without --stored")
+        out = est.meta.get("sbc") or {}
+        if not any(isinstance(s, dict) and "coverage90_range" in s for s in out.values()):
+            raise ValueError(f"{where}: the file stores no SBC (field 'sbc' of its meta.json); run the SBC "
+                             "without --stored")
+        result(f"{cls} K={args.ramps}: the SBC stored in {where} (default route {est.default_route})")
+    else:
+        settings = CalibrationSettings(progress=False, time_budget=args.time_budget)
+        out = estimator_sbc(est, args.truths, seed=args.seed, workers=args.workers, route_truths=args.route_truths,
+                            route_settings=settings, progress=progress_enabled(), log=info,
+                            specimens=args.specimens)
+    _print_sbc(cls, args.ramps, out)
     if args.figure is not None:
         from ..inference.diagnostics.sbc_figure import sbc_figure
 
@@ -258,6 +245,36 @@ def run_sbc(args) -> int:
         atomic_write(args.json, lambda fh: fh.write(text.encode()))
         result(f"wrote {args.json}")
     return 0
+
+
+def _print_sbc(cls: str, ramps: int, out: dict) -> None:
+    """The SBC figures ``out`` (estimator_sbc's, or a file's stored ones), route by route:
+    the gate's headline, the lines' widths, the specimen rows, the default route."""
+    from ..inference.diagnostics.routes import headline, score_by
+    from ..inference.samplers.smc import describe_route_knobs
+
+    for route, s in out.items():
+        if not isinstance(s, dict) or "coverage90_range" not in s:  # the route table's own record
+            continue
+        result(f"{cls} K={ramps} {route}: {headline(s)}")
+        prior = s.get("prior_width_over_truth")  # the amortized route's SBC carries the prior's beside
+        if "width_over_truth" in s:  # a stacked row, derived from two routes' ranks, has no draws to measure
+            widths = " ".join(f"{k.split()[2][0]}{k.split()[1]}{k[-3:]} {v:.2f}" + (f"/{prior[k]:.2f}" if prior else "")
+                              for k, v in s["width_over_truth"].items() if k.startswith("line"))
+            result(f"  median 90% width / truth{' (posterior/prior)' if prior else ''}: {widths}")
+    if "specimens" in out:
+        for route, s in out["specimens"]["rows"].items():
+            widths = " ".join(f"{v:.2f}" for k, v in s.get("width_over_truth", {}).items() if k.startswith("line"))
+            result(f"{cls} K={ramps} {route} on {out['specimens']['drones']} specimen drones: log score "
+                   f"{s['log_score']:.2f}{score_by(s)}" + (f", lines' median 90% width / truth {widths}" if widths
+                                                           else ""))
+    if "route_table" in out:
+        t = out["route_table"]
+        result(f"{cls} K={ramps} default route: {t['default']} ({t['default_by']})")
+        if "route_settings" in t:
+            k = t["route_settings"]
+            result("  the smc route's knobs (the settings', else the file's, else the defaults): "
+                   + describe_route_knobs(k))
 
 
 def add_train(sub, parents, help):
@@ -340,6 +357,9 @@ def add_sbc(sub, parents, help):
     p.add_argument("--json", type=Path, default=None, help="write the figures as JSON (default: none)")
     p.add_argument("--figure", type=Path, default=None,
                    help="write the rank histograms and coverage curves (default: none)")
+    p.add_argument("--stored", action="store_true",
+                   help="print the SBC, route table and specimen rows the estimator file stores (how its default "
+                        "route was named) and simulate nothing")
     p.set_defaults(func=run_sbc)
     return p
 

@@ -565,6 +565,33 @@ def test_sbc_specimens_without_a_route_table_run_the_amortized_route_alone(tiny,
     assert "HELI K=4 amortized on 4 specimen drones: log score" in text and "default route" not in text
 
 
+def test_sbc_stored_prints_what_the_shipped_file_says_and_simulates_nothing(tmp_path, capsys):
+    """`mdaug sbc --stored`: the gate's lines, specimen rows and default route that named
+    QUAD K = 32's stacked route, read from the file (the README quotes them)."""
+    from mdaug.cli import main
+
+    js = tmp_path / "stored.json"
+    assert main(["sbc", "--class", "QUAD", "--ramps", "32", "--stored", "--json", str(js)]) == 0
+    text = capsys.readouterr().out
+    data = json.loads(js.read_text())
+    assert data["route_table"]["default"] == "stacked" and data["stacked"]["n_replicates"] == 200
+    assert "QUAD K=32: the SBC stored in the shipped estimator (default route stacked)" in text
+    assert f"QUAD K=32 stacked: outer-10% share {data['stacked']['outer_share']:.3f}" in text
+    stacked = data["specimens"]["rows"]["stacked"]["log_score"]
+    assert f"QUAD K=32 stacked on 20 specimen drones: log score {stacked:.2f} (exact)\n" in text
+    assert stacked < data["specimens"]["rows"]["amortized"]["log_score"]  # why it is the default
+    assert "QUAD K=32 default route: stacked (log score on 20 specimen drones)" in text
+
+
+def test_sbc_stored_refuses_a_file_without_sbc_and_a_figure(tiny, tmp_path, refused):
+    _, path = tiny  # trained with sbc_truths=0: no SBC stored
+    inputs, out = _folders(tmp_path)
+    base = ["sbc", "--class", "HELI", "--ramps", "4", "--stored"]
+    refused(base + ["--estimator", str(path), "--json", str(out / "s.json")], inputs, out,
+            [f"--estimator {path}: the file stores no SBC", "field 'sbc'"])
+    refused(base + ["--figure", str(out / "s.png")], inputs, out, ["--figure", "without --stored"])
+
+
 def test_start_from_is_checked_before_any_work(tiny, tmp_path, refused):
     _, path = tiny
     inputs, out = _folders(tmp_path)
