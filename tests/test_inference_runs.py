@@ -226,10 +226,11 @@ def test_the_shipped_quad_best_fit_is_nearer_the_truth_than_the_amortized_median
     median, with the knobs the file states (the thorough ones), is the best fit on every
     route. On drones like a user's (the specimen model, 5 measurements) the brightest
     engine's four lines of that fit are nearer the truth than the amortized median's,
-    on every drone and by about half on average (with the shipped file, refined and at
-    temperature 1.1, the thorough knobs: mean line error 0.17 / 0.14 / 0.18 against 0.34 /
-    0.26 / 0.27 on these three drones (the route's default knobs: 0.15 / 0.18 / 0.18); tests/benchmarks/best_fit.py on 11 drones with the 20,000-drone
-    file: 23 / 8 / 10 / 5% against 67 / 14 / 32 / 36%)."""
+    on every drone and by about half on average (the shipped file, its widened likelihood
+    and thorough knobs: mean line error 0.165 / 0.142 / 0.142 against 0.344 / 0.260 / 0.265
+    on these three drones; tests/benchmarks/best_fit.py on 11 drones: 29 / 3 / 8 / 13% off
+    against 67 / 14 / 32 / 36% for the amortized median, 33 / 5 / 12 / 13% for the stacked
+    posterior's)."""
     from dataclasses import replace
 
     from mdaug.generator.acquisition import Acquisition
