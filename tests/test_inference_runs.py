@@ -229,7 +229,7 @@ def test_the_shipped_quad_best_fit_is_nearer_the_truth_than_the_amortized_median
     on every drone and by about half on average (the shipped file, its widened likelihood
     and thorough knobs: mean line error 0.165 / 0.142 / 0.142 against 0.344 / 0.260 / 0.265
     on these three drones; tests/benchmarks/best_fit.py on 11 drones: 29 / 3 / 8 / 13% off
-    against 67 / 14 / 32 / 36% for the amortized median, 33 / 5 / 12 / 13% for the stacked
+    against 67 / 14 / 32 / 36% for an earlier file's amortized median, 33 / 5 / 12 / 13% for the stacked
     posterior's)."""
     from dataclasses import replace
 
