@@ -220,6 +220,9 @@ def run_sbc(args) -> int:
         if args.figure is not None:
             raise ValueError("--figure: the rank histograms need the drones' ranks, which a file does not store; "
                              "run the SBC without --stored")
+        asked = [f"--{n} {v}" for n, v in (("route-truths", args.route_truths), ("specimens", args.specimens)) if v]
+        if asked:
+            raise ValueError(f"{', '.join(asked)}: --stored simulates no drones; run the SBC without --stored")
         out = est.meta.get("sbc") or {}
         if not any(isinstance(s, dict) and "coverage90_range" in s for s in out.values()):
             raise ValueError(f"{where}: the file stores no SBC (field 'sbc' of its meta.json); run the SBC "

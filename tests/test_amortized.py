@@ -590,6 +590,7 @@ def test_sbc_stored_refuses_a_file_without_sbc_and_a_figure(tiny, tmp_path, refu
     refused(base + ["--estimator", str(path), "--json", str(out / "s.json")], inputs, out,
             [f"--estimator {path}: the file stores no SBC", "field 'sbc'"])
     refused(base + ["--figure", str(out / "s.png")], inputs, out, ["--figure", "without --stored"])
+    refused(base + ["--specimens", "5"], inputs, out, ["--specimens 5: --stored simulates no drones"])
 
 
 def test_start_from_is_checked_before_any_work(tiny, tmp_path, refused):
