@@ -273,6 +273,11 @@ def _print_sbc(cls: str, ramps: int, out: dict) -> None:
                                                            else ""))
     if "route_table" in out:
         t = out["route_table"]
+        rows = "; ".join(f"{name} {r['verdict']} (outer {r['outer_share']:.3f}, coverage "
+                         f"{r['coverage90_range'][0]:.2f}-{r['coverage90_range'][1]:.2f}, log score {r['log_score']:.2f})"
+                         for name, r in t.get("rows", {}).items() if "verdict" in r and "log_score" in r)
+        if rows:  # the rows that named the default, each on the table's own drones
+            result(f"{cls} K={ramps} route table on {t['drones']} drones: {rows}")
         result(f"{cls} K={ramps} default route: {t['default']} ({t['default_by']})")
         if "route_settings" in t:
             k = t["route_settings"]

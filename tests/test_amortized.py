@@ -581,6 +581,8 @@ def test_sbc_stored_prints_what_the_shipped_file_says_and_simulates_nothing(tmp_
     assert f"QUAD K=32 stacked on 20 specimen drones: log score {stacked:.2f} (exact)\n" in text
     assert stacked < data["specimens"]["rows"]["amortized"]["log_score"]  # why it is the default
     assert "QUAD K=32 default route: stacked (log score on 20 specimen drones)" in text
+    table = next(line for line in text.splitlines() if line.startswith("QUAD K=32 route table on 200 drones: "))
+    assert "amortized overconfident" in table and "smc overconfident" in table and "stacked honest" in table
 
 
 def test_sbc_stored_refuses_a_file_without_sbc_and_a_figure(tiny, tmp_path, refused):

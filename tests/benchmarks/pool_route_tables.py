@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import warnings
 import zipfile
 
@@ -109,8 +110,6 @@ def main(argv=None) -> int:
         print(f"stacking weight of the smc route: {w:.3f}" + (" (given)" if a.stack_weight is not None else
               f" (fitted: the truth's log score on the {len(log_smc)} pooled drones)"))
         if a.fit_stacking:
-            import sys
-
             est.meta["stacking"] = {
                 "weight": round(w, 3), "drones": int(len(log_smc)), "seeds": [seed for _, seed, _ in a.runs],
                 "log_score": {"smc": float(log_smc.mean()), "amortized": float(log_amortized.mean()),
@@ -128,6 +127,8 @@ def main(argv=None) -> int:
         sbc = est.meta["sbc"]
         sbc["stacked"] = {**stacked[0], "verdict": verdict(stacked[0])}
         sbc["route_table"]["rows"]["stacked"] = trimmed_row(sbc["stacked"])
+        sbc["route_table"]["command"] = (f"{sbc['route_table'].get('command', a.runs[0][0])}; then "
+                                         "python tests/benchmarks/pool_route_tables.py " + " ".join(sys.argv[1:]))
         sbc.pop("specimens", None)  # its rows have no stacked route: rerun them
         name_default_route(sbc)
         est.meta["stacking"] = {"weight": w, **{k: v for k, v in (est.meta.get("stacking") or {}).items()

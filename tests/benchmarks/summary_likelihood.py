@@ -125,7 +125,9 @@ def main(argv=None) -> int:
             meta, state = to_parts(model, report)
             torch.save(state, f"{a.save_model}.pt")
             open(f"{a.save_model}.json", "w").write(json.dumps(meta))
-    report = {**report, "command": "python tests/benchmarks/summary_likelihood.py " + " ".join(sys.argv[1:])}
+    command = "python tests/benchmarks/summary_likelihood.py " + " ".join(sys.argv[1:])
+    if not a.from_file:  # a file's model keeps the command that trained it; this one made its tables
+        report = {**report, "command": command}
     est.with_summary(model, report)
     est.save(a.out)  # the routes read the file in their worker processes
     knobs = dict(THOROUGH_ROUTE) if a.thorough else {"route_moves": True} if a.moves else {}  # else the file's
@@ -141,6 +143,7 @@ def main(argv=None) -> int:
                             route_settings=settings, estimator_path=a.out, log=print, routes=routes,
                             specimens=a.specimens, specimen_seed=a.seed + 1)
         new.update({k: v for k, v in sbc.items() if k not in ("amortized", "n_measurements")})
+        new["route_table"]["command"] = command
         print(f"\nroute table, {a.route_truths} fresh prior drones (SBC), {a.cls} K = {a.ramps}, 5 measurements:")
         print(table(sbc["route_table"]["rows"], names))
     elif a.specimens:  # the file's route table kept, its specimen drones rerun
@@ -148,6 +151,7 @@ def main(argv=None) -> int:
                                           estimator_path=a.out, routes=routes)
     if a.specimens:
         spec = new["specimens"]
+        spec["command"] = command
         print(f"\n{a.specimens} drones drawn as the study draws new drones (specimen model around the reference):")
         print(table(spec["rows"], names, spec.get("crb_width_over_truth")))
     if new.get("route_table"):  # honest on the prior, sharpest where users are
