@@ -261,7 +261,7 @@ def _print_sbc(cls: str, ramps: int, out: dict) -> None:
             continue
         result(f"{cls} K={ramps} {route}: {headline(s)}")
         prior = s.get("prior_width_over_truth")  # the amortized route's SBC carries the prior's beside
-        if "width_over_truth" in s:  # a stacked row, derived from two routes' ranks, has no draws to measure
+        if "width_over_truth" in s:  # a stacked row derived from stored ranks alone has no draws to measure
             widths = " ".join(f"{k.split()[2][0]}{k.split()[1]}{k[-3:]} {v:.2f}" + (f"/{prior[k]:.2f}" if prior else "")
                               for k, v in s["width_over_truth"].items() if k.startswith("line"))
             result(f"  median 90% width / truth{' (posterior/prior)' if prior else ''}: {widths}")

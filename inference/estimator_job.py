@@ -215,7 +215,8 @@ def estimator_sbc(est: AmortizedEstimator, n_truths: int, *, seed: int = 0, work
         routes = {name: Route(name, est if estimator_path is None else estimator_path, settings)
                   for name in runs_for(est, wanted)}
         table = route_table(routes, truths[:k], profiles[:k], lf.names, to_unbounded=lf.to_unbounded, seed=seed,
-                            progress=progress, workers=workers if estimator_path is not None else 1)
+                            progress=progress, workers=workers if estimator_path is not None else 1,
+                            keep_draws="stacked" in wanted)
         add_stacked(est, table["rows"], wanted)
         if "stacked" in wanted:  # judged by the gate beside the routes that ran
             from .diagnostics.routes import default_route
@@ -293,11 +294,15 @@ def runs_for(est: AmortizedEstimator, wanted: tuple[str, ...]) -> tuple[str, ...
 def add_stacked(est: AmortizedEstimator, rows: dict, wanted: tuple[str, ...]) -> None:
     """Where ``wanted`` holds the stacked route: its row (in place), derived from the full
     smc and amortized rows of the same drones with the file's stacking weight
-    (:func:`mdaug.inference.diagnostics.stacking.stacked_row`)."""
+    (:func:`mdaug.inference.diagnostics.stacking.stacked_row`; their draws, kept for its
+    widths, are dropped from every row)."""
     if "stacked" in wanted:
         from .diagnostics.stacking import stacked_row
 
         rows["stacked"] = stacked_row(rows["smc"], rows["amortized"], est.stacking_weight)
+    for row in rows.values():  # the draws the mixture's widths needed are not stored
+        row.pop("draws", None)
+        row.pop("truths", None)
 
 
 class Route:
@@ -375,7 +380,7 @@ def specimen_table(est: AmortizedEstimator, n: int, *, settings=None, seed: int 
         route = Route(name, est if estimator_path is None else estimator_path, settings)
         rows[name] = run(route, truths, profiles, lf.names, seed=seed, to_unbounded=lf.to_unbounded,
                          progress=progress, desc=f"specimens {name}",
-                         workers=workers if estimator_path is not None else 1)
+                         workers=workers if estimator_path is not None else 1, keep_draws="stacked" in wanted)
     add_stacked(est, rows, wanted)
     out = {"drones": int(n), "near_width": 1.0, "rows": {name: trimmed_row(r) for name, r in rows.items()}}
     if "smc" in rows:

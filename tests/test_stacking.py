@@ -66,12 +66,36 @@ class _Route:
         return stats.norm.logpdf(u[0], m, sd)
 
 
-def _rows(n_truths, seed, scales, draw_seed=None):
+def _rows(n_truths, seed, scales, draw_seed=None, keep_draws=False):
     rng = np.random.default_rng(seed)
     truths = rng.normal(size=(n_truths, 1))
     data = [t + rng.normal(size=5) for t in truths[:, 0]]
     return {k: run(_Route(k), truths, data, ["theta"], seed=seed if draw_seed is None else draw_seed,
-                   to_unbounded=lambda q: q) for k in scales}
+                   to_unbounded=lambda q: q, keep_draws=keep_draws) for k in scales}
+
+
+def test_the_stacked_rows_widths_are_the_mixtures_where_both_routes_kept_their_draws():
+    from types import SimpleNamespace
+
+    from mdaug.inference.estimator_job import add_stacked, trimmed_row
+
+    w = 0.7
+    rows = _rows(600, 21, (0.5, 2.0), keep_draws=True)
+    truths = rows[0.5]["truths"][:, 0]
+    # the exact mixture's 90% interval: w N(m, (0.5 s)^2) + (1 - w) N(m, (2 s)^2), s the exact sd
+    x95 = optimize.brentq(lambda x: w * stats.norm.cdf(x / 0.5) + (1 - w) * stats.norm.cdf(x / 2.0) - 0.95, 0, 10)
+    exact = np.median(2 * x95 * np.sqrt(1 / 6) / np.abs(truths))
+    row = stacked_row(rows[0.5], rows[2.0], w)
+    assert row["width_over_truth"]["theta"] == pytest.approx(exact, rel=0.1)
+    assert rows[0.5]["width_over_truth"]["theta"] < row["width_over_truth"]["theta"] < rows[2.0]["width_over_truth"][
+        "theta"]
+    assert "width_over_truth" not in stacked_row(*_rows(50, 22, (0.5, 2.0)).values(), w)  # no draws, no widths
+    # a table's rows: the stacked one derived with its widths, the draws dropped from every row before it is stored
+    table = {"smc": rows[0.5], "amortized": rows[2.0]}
+    add_stacked(SimpleNamespace(stacking_weight=w), table, ("smc", "stacked"))
+    assert table["stacked"]["width_over_truth"] == row["width_over_truth"]
+    assert not any("draws" in r or "truths" in r for r in table.values())
+    assert "width_over_truth" in trimmed_row({**table["stacked"], "verdict": "honest"})
 
 
 def test_a_stacked_narrow_and_wide_route_is_honest_and_beats_both_where_the_weight_was_not_chosen():

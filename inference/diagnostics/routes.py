@@ -35,12 +35,16 @@ def _timed(draw, y, n, seed, truth_u=None):
 
 
 def run(draw, truths_q: np.ndarray, data, names: list[str], *, n_rank: int = 199, prior_q: np.ndarray | None = None,
-        seed: int = 0, to_unbounded=None, progress=None, desc: str = "SBC", workers: int = 1) -> dict:
+        seed: int = 0, to_unbounded=None, progress=None, desc: str = "SBC", workers: int = 1,
+        keep_draws: bool = False) -> dict:
     """SBC of ``draw`` (module doc) over truths_q (R, d) and their data (R profile
     sets). prior_q: prior draws (n, d) for the prior's widths; to_unbounded: map of q
     for TARP (z-scored there); workers: processes (``draw`` must then pickle, e.g.
     :class:`mdaug.inference.estimator_job.Route`). Returns the summary (plain floats
-    and lists); drone i's draws depend only on ``seed + i``, whatever the workers."""
+    and lists); drone i's draws depend only on ``seed + i``, whatever the workers.
+    keep_draws: also ``draws`` (n_rank, R, d) and ``truths`` (R, d), arrays for a row
+    derived from this one (a stacked route's widths); whoever asks for them drops them
+    before the row is stored."""
     from ...radar.progress import progress_bar
 
     recs, samples = [], []
@@ -69,7 +73,7 @@ def run(draw, truths_q: np.ndarray, data, names: list[str], *, n_rank: int = 199
     out = summarise(recs, n_rank)
     s = np.stack(samples, axis=1)  # (n_rank, R, d)
     out.update(coverage(s, truths_q, names))
-    out["width_over_truth"] = _widths(s, truths_q, names)
+    out["width_over_truth"] = widths_over_truth(s, truths_q, names)
     if prior_q is not None:
         lo, hi = np.quantile(prior_q, [0.05, 0.95], axis=0)
         out["prior_width_over_truth"] = dict(zip(names, map(float, np.median((hi - lo) / np.abs(truths_q), axis=0))))
@@ -79,6 +83,8 @@ def run(draw, truths_q: np.ndarray, data, names: list[str], *, n_rank: int = 199
     out.update(log_score(su, tu, None if None in densities else np.array(densities)))
     out["ranks"] = out["ranks"].tolist()
     out["exact_fail_chance"] = exact_fail_chance(len(truths_q), len(names))
+    if keep_draws:
+        out["draws"], out["truths"] = s, np.asarray(truths_q, float)
     return out
 
 
@@ -96,7 +102,9 @@ def coverage(samples: np.ndarray, truths: np.ndarray, names: list[str]) -> dict:
             "coverage90_range": [min(v["0.90"] for v in per.values()), max(v["0.90"] for v in per.values())]}
 
 
-def _widths(samples: np.ndarray, truths: np.ndarray, names: list[str]) -> dict:
+def widths_over_truth(samples: np.ndarray, truths: np.ndarray, names: list[str]) -> dict:
+    """Per quantity, the median over drones of the 90% interval's width over |truth|
+    (samples (S, R, d), truths (R, d))."""
     lo, hi = np.quantile(samples, [0.05, 0.95], axis=0)
     return dict(zip(names, map(float, np.median((hi - lo) / np.abs(truths), axis=0))))
 
@@ -135,15 +143,15 @@ def score_by(row: dict) -> str:
 
 
 def route_table(routes: dict, truths_q: np.ndarray, data, names: list[str], *, to_unbounded, n_rank: int = 199,
-                seed: int = 0, progress=None, workers: int = 1) -> dict:
+                seed: int = 0, progress=None, workers: int = 1, keep_draws: bool = False) -> dict:
     """Every route (name -> draw(profiles, n, seed) -> (q draws (n, d), converged)) on
     the same drones; returns {"rows": {name: summary}, "default": name or None}: the
     best (lowest) log score among the routes that pass the gate (None when none does;
-    :func:`default_route`)."""
+    :func:`default_route`). keep_draws: as :func:`run`'s, for every row."""
     rows = {}
     for name, draw in routes.items():
         rows[name] = run(draw, truths_q, data, names, n_rank=n_rank, seed=seed, to_unbounded=to_unbounded,
-                         progress=progress, desc=f"SBC {name}", workers=workers)
+                         progress=progress, desc=f"SBC {name}", workers=workers, keep_draws=keep_draws)
         rows[name]["verdict"] = verdict(rows[name])
     return {"rows": rows, "default": default_route(rows)}
 

@@ -61,8 +61,11 @@ def stacked_row(row_a: dict, row_b: dict, weight: float, sources: tuple[str, str
     ``ranks`` and ``log_score_by_drone``; module doc): outer-10% share, coverage at
     :data:`LEVELS` pooled and per quantity, the log score of the truth (exact: both rows'
     must be), convergence (route a's: b is the amortized route's exact draws), seconds
-    per drone (both routes'). Widths and TARP need the draws, which the rows do not keep:
-    the row has neither.
+    per drone (both routes'). The widths need the draws: where both rows kept theirs
+    (``draws`` and ``truths`` of :func:`~mdaug.inference.diagnostics.routes.run` with
+    ``keep_draws``), the mixture's draws of each drone are the first round(w n) of a's and
+    the first n - round(w n) of b's (each route's draws exchangeable), and the row has
+    ``width_over_truth``; else it has none. It never has TARP.
     sources: the two routes' names, kept in the row (``derived_from``)."""
     from scipy import stats
 
@@ -91,7 +94,14 @@ def stacked_row(row_a: dict, row_b: dict, weight: float, sources: tuple[str, str
     chi2 = ((counts - len(f) / 5) ** 2 / (len(f) / 5)).sum(axis=1)  # F's histogram, as the ranks' (sbc.summarise)
     cov90 = [v["0.90"] for v in per.values()]
     seconds = np.asarray(row_a["seconds"], float) + np.asarray(row_b["seconds"], float)
-    return {"names": names, "n_rank": n, "n_replicates": int(len(f)), "weight": float(weight),
+    widths = {}
+    if "draws" in row_a and "draws" in row_b:  # the mixture's own draws, drone by drone
+        from .routes import widths_over_truth
+
+        k = int(round(weight * n))
+        mixed = np.concatenate([row_a["draws"][:k], row_b["draws"][:n - k]])
+        widths["width_over_truth"] = widths_over_truth(mixed, row_a["truths"], names)
+    return {**widths, "names": names, "n_rank": n, "n_replicates": int(len(f)), "weight": float(weight),
             "pooled_p": float(stats.chi2.sf(chi2.sum(), 4 * len(chi2))), "outer_share": float(outer.mean()),
             "outer_share_by_quantity": dict(zip(names, map(float, outer.mean(0)))),
             "coverage": pooled, "coverage_by_quantity": per, "coverage90_range": [min(cov90), max(cov90)],
