@@ -578,7 +578,9 @@ def test_sbc_stored_prints_what_the_shipped_file_says_and_simulates_nothing(tmp_
     assert "QUAD K=32: the SBC stored in the shipped estimator (default route stacked)" in text
     assert f"QUAD K=32 stacked: outer-10% share {data['stacked']['outer_share']:.3f}" in text
     stacked = data["specimens"]["rows"]["stacked"]["log_score"]
-    assert f"QUAD K=32 stacked on 20 specimen drones: log score {stacked:.2f} (exact)\n" in text
+    widths = " ".join(f"{v:.2f}" for v in list(data["specimens"]["rows"]["stacked"]["width_over_truth"].values())[:4])
+    assert f"QUAD K=32 stacked on 20 specimen drones: log score {stacked:.2f} (exact), lines' median 90% " \
+           f"width / truth {widths} " in text  # the mixture's widths, from both routes' draws
     assert stacked < data["specimens"]["rows"]["amortized"]["log_score"]  # why it is the default
     assert "QUAD K=32 default route: stacked (log score on 20 specimen drones)" in text
     table = next(line for line in text.splitlines() if line.startswith("QUAD K=32 route table on 200 drones: "))
