@@ -127,7 +127,8 @@ def main(argv=None) -> int:
         sbc = est.meta["sbc"]
         sbc["stacked"] = {**stacked[0], "verdict": verdict(stacked[0])}
         sbc["route_table"]["rows"]["stacked"] = trimmed_row(sbc["stacked"])
-        sbc["route_table"]["command"] = (f"{sbc['route_table'].get('command', a.runs[0][0])}; then "
+        made = sbc["route_table"].get("command", f"the route table of {a.runs[0][0]}")
+        sbc["route_table"]["command"] = (f"{made}; then "
                                          "python tests/benchmarks/pool_route_tables.py " + " ".join(sys.argv[1:]))
         sbc.pop("specimens", None)  # its rows have no stacked route: rerun them
         name_default_route(sbc)
