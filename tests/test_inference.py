@@ -307,14 +307,22 @@ def test_plots_are_written(quick_heli, tmp_path):
 def test_posterior_augmenter_draws_beyond_the_chain(quick_heli, tmp_path):
     _, res = quick_heli
     n = res.n_draws + 500
-    aug = PosteriorAugmenter(res, random_state=3)
+    pool = np.concatenate([res.draws(measurement=m) for m in range(res.n_measurements)])
+    plain = PosteriorAugmenter(res, random_state=3).sample(n)
+    assert plain.profiles.shape == (n, 400) and plain.params.shape == (n, 13)
+    # the default is the plain bootstrap: every vector is one of the posterior's draws
+    j = IDX["w_a"]
+    assert np.isin(plain.params[:, j], pool[:, j]).all()
+    # this result's acquisition draws no nuisances: a repeated draw renders the same profile
+    n_rows, n_renders = len(np.unique(plain.params, axis=0)), len(np.unique(plain.profiles, axis=0))
+    assert 0.99 * n_rows <= n_renders <= n_rows < n
+    aug = PosteriorAugmenter(res, random_state=3, jitter=0.1)
     batch = aug.sample(n)
-    assert batch.profiles.shape == (n, 400) and batch.params.shape == (n, 13)
-    assert len(np.unique(batch.params[:, IDX["w_a"]])) == n  # jitter: no repeated rows
-    same = PosteriorAugmenter(res, random_state=3).sample(n)
+    assert len(np.unique(batch.params[:, j])) == n  # jitter: no repeated rows
+    assert not np.isin(batch.params[:, j], pool[:, j]).any()
+    same = PosteriorAugmenter(res, random_state=3, jitter=0.1).sample(n)
     np.testing.assert_array_equal(same.params, batch.params)
     mean, sd = res.draws().mean(0), res.draws().std(0)
-    j = IDX["w_a"]
     assert abs(batch.params[:, j].mean() - mean[j]) < 0.2 * sd[j]
     assert batch.params[:, j].std() == pytest.approx(sd[j] * np.sqrt(1 + 0.1**2), rel=0.1)
     assert np.all(batch.params[:, [IDX["A_a"], IDX["w_b"]]] >= 0)

@@ -1,14 +1,23 @@
 """Posterior augmentation: class vectors drawn from a calibrated posterior.
 
-Method (as many vectors as asked, even beyond the chain's length): a smoothed
-bootstrap of the stored draws. Each new vector is a uniformly resampled posterior
-draw plus Gaussian kernel jitter of ``jitter`` x the posterior sd of every
-parameter (phases: x the circular sd, then wrapped; the fixed Gamma of engine 0:
-no jitter). The default jitter 0.1 inflates each marginal variance by 1% and makes
-repeated draws distinct. Non-negative parameters that jitter below zero are
-reflected (|x|). Phases of draw i come from the measurement the resampled draw was
-paired with (all measurements used evenly); a marginal posterior holds no phases,
-and the acquisition that renders the vectors draws them.
+Method (as many vectors as asked, even beyond the chain's length): a bootstrap of the
+stored draws. Each new vector is a uniformly resampled posterior draw; the acquisition
+that renders it draws fresh phases, noise, carrier and range jitter where it has them,
+so repeated draws give distinct profiles (under an acquisition without such nuisances,
+the same profile). ``jitter`` > 0 makes it a smoothed bootstrap: Gaussian
+kernel jitter of ``jitter`` x the posterior sd of every parameter (phases: x the
+circular sd, then wrapped; the fixed Gamma of engine 0: no jitter; non-negative
+parameters that jitter below zero are reflected, |x|). The default is no jitter: the
+kernel's width comes from the marginal sd, which for a posterior with several modes in
+the lines (a sideband fits nearly as well as the line) spans the modes, not one mode.
+On the default study's
+posteriors (QUAD's brightest engine: its lines' marginal sd 0.25-0.65 x their
+median, its amplitudes' 0.71-1.09), XGBoost / SVM trained on
+1,000 renders per class scored 0.873 / 0.710 on ``new_large`` without jitter against
+0.702 / 0.539 with 0.1 (QUAD recall 0.82 against 0.42). Phases of draw i come from the
+measurement the resampled draw was paired with (all measurements used evenly); a
+marginal posterior holds no phases, and the acquisition that renders the vectors draws
+them.
 
 The vectors are rendered by a :class:`~mdaug.generator.augment.Renderer` under an
 acquisition: by default the one the posterior was calibrated under, with the
@@ -39,9 +48,9 @@ def load_posterior(posterior, label: str | None = None, allow_unconverged: bool 
 
 
 class PosteriorSource(VectorSource):
-    """Vectors from a posterior by the smoothed bootstrap of the module doc."""
+    """Vectors from a posterior by the bootstrap of the module doc (smoothed when ``jitter`` > 0)."""
 
-    def __init__(self, posterior, *, label: str | None = None, jitter: float = 0.1, allow_unconverged: bool = True):
+    def __init__(self, posterior, *, label: str | None = None, jitter: float = 0.0, allow_unconverged: bool = True):
         self.file = None if isinstance(posterior, CalibrationResult) else str(posterior)
         self.posterior = load_posterior(posterior, label, allow_unconverged)
         if not (np.isfinite(jitter) and jitter >= 0):
@@ -61,6 +70,8 @@ class PosteriorSource(VectorSource):
 
     def draw(self, n: int, rng: np.random.Generator) -> np.ndarray:
         idx = rng.integers(len(self._pool), size=n)
+        if not self.jitter:
+            return self._pool[idx].copy()
         x = self._pool[idx] + self.jitter * self._sd * rng.standard_normal((n, self._pool.shape[1]))
         x[:, self._phase_cols] = wrap_phase(x[:, self._phase_cols])
         x[:, self._nonneg] = np.abs(x[:, self._nonneg])
@@ -70,7 +81,8 @@ class PosteriorSource(VectorSource):
         d = self.posterior.diagnostics
         return {"source": "posterior", "posterior_file": self.file, "class_name": self.posterior.class_name,
                 "n_posterior_draws": int(len(self._pool)), "jitter": self.jitter,
-                "method": "smoothed bootstrap: resampled draws + Gaussian jitter x posterior sd",
+                "method": ("smoothed bootstrap: resampled draws + Gaussian jitter x posterior sd" if self.jitter
+                           else "bootstrap: resampled posterior draws"),
                 "posterior_converged": bool(d["converged"]), "best_fit": self.posterior.best_fit.tolist()}
 
 
@@ -85,7 +97,7 @@ class PosteriorAugmenter(ModelAugmenter):
 
     def __init__(self, posterior, *, label: str | None = None, acquisition=None, specimens: SpecimenSpread | None = None,
                  normalisation: str = "peak", radar: RadarConfig = RadarConfig(), dtype: str = "float32",
-                 through_chain: bool = False, scene=None, random_state=None, jitter: float = 0.1,
+                 through_chain: bool = False, scene=None, random_state=None, jitter: float = 0.0,
                  allow_unconverged: bool = True):
         src = PosteriorSource(posterior, label=label, jitter=jitter, allow_unconverged=allow_unconverged)
         if specimens is not None:
