@@ -11,10 +11,11 @@ parameters that jitter below zero are reflected, |x|). The default is no jitter:
 kernel's width comes from the marginal sd, which for a posterior with several modes in
 the lines (a sideband fits nearly as well as the line) spans the modes, not one mode.
 On the default study's
-posteriors (QUAD's brightest engine: its lines' marginal sd 0.25-0.65 x their
-median, its amplitudes' 0.71-1.09), XGBoost / SVM trained on
-1,000 renders per class scored 0.873 / 0.710 on ``new_large`` without jitter against
-0.702 / 0.539 with 0.1 (QUAD recall 0.82 against 0.42). Phases of draw i come from the
+posteriors (QUAD's brightest engine: its lines' marginal sd 0.25-0.65 x their median,
+its amplitudes' 0.71-1.09), XGBoost / SVM trained on 1,000 renders per class scored
+0.861 / 0.702 on ``new_large`` without jitter against 0.728 / 0.539 with 0.1 (QUAD
+recall 0.80 / 0.44 against 0.49 / 0.08; ``python tests/benchmarks/calibration_gap.py DIR
+--jitter 0.1``), and the study's ``posterior`` CNN 0.85 against 0.64. Phases of draw i come from the
 measurement the resampled draw was paired with (all measurements used evenly); a
 marginal posterior holds no phases, and the acquisition that renders the vectors draws
 them.

@@ -1,7 +1,7 @@
 """How sharp must a calibration be for its synthetic training set to classify new drones?
 
 python tests/benchmarks/calibration_gap.py STUDY_DIR [--n 1000] [--shrink 1,0.5,0.3] [--models xgb,svm] \
-    [--smc QUAD=FILE]
+    [--smc QUAD=FILE] [--jitter 0.1]
 
 STUDY_DIR: a finished simulated study (``mdaug run --out STUDY_DIR``). Its drones are
 drawn around the packaged class references, so the reference is what a perfect
@@ -14,8 +14,11 @@ are trained on it and scored (balanced accuracy, per-class recall) on the study'
 * ``reference``: the class reference drone only (what the whole method can reach);
 * ``best fit``: the study's best fit only (the ``sigma_p_fit`` strategy's source at
   sigma_P = 0: the smc median of the summary likelihood where the estimator has one);
-* ``posterior``: the study's posterior draws (the ``posterior`` strategy's source, without
-  its smoothing jitter);
+* ``posterior``: the study's posterior draws (the ``posterior`` strategy's source, each
+  draw once here, where the strategy resamples them);
+* ``posterior, kernel jitter J`` (with --jitter J): the draws resampled with a Gaussian
+  jitter of J x each parameter's posterior sd (``PosteriorSource(jitter=J)``; 0.1 was the
+  ``posterior`` strategy's default before this release);
 * ``the smc route's draws`` (with --smc): the summary likelihood's posterior, where a class's
   posterior is the amortized one the draws kept beside it (``mdaug calibrate --check-route``
   of the same measurements): what the study would train on if that route were its posterior;
@@ -49,13 +52,18 @@ def label_free(ref):
     return LabelFree(ref.n_engines, Priors.from_reference(ref, RadarConfig()), ref.to_array())
 
 
-def vector_sources(study: str, shrinks, smc_files: dict | None = None) -> dict:
+def vector_sources(study: str, shrinks, smc_files: dict | None = None, jitter: float = 0.0, seed: int = 0) -> dict:
     """{row name: {class: vectors (n, 13E)}}; with smc_files ({class: posterior file kept
-    with ``--check-route``}) the row of every class's smc draws."""
+    with ``--check-route``}) the row of every class's smc draws; with jitter > 0 the row of
+    the draws resampled with that kernel jitter."""
     from mdaug.generator import load_reference
-    from mdaug.inference.result.augment import load_posterior
+    from mdaug.inference.result.augment import PosteriorSource, load_posterior
 
     rows = {"reference": {}, "best fit": {}, "posterior": {}}
+    jitter_row = f"posterior, kernel jitter {jitter:g}"
+    if jitter > 0:
+        rows[jitter_row] = {}
+    rng = np.random.default_rng(seed)
     if smc_files is not None:
         rows[SMC_ROW] = {}
     rows.update({f"posterior at the reference, x {s:g}": {} for s in shrinks})
@@ -67,6 +75,8 @@ def vector_sources(study: str, shrinks, smc_files: dict | None = None) -> dict:
         rows["reference"][cls] = ref.to_array()[None]
         rows["best fit"][cls] = post.best_fit[None]
         rows["posterior"][cls] = x
+        if jitter > 0:
+            rows[jitter_row][cls] = PosteriorSource(post, label=cls, jitter=jitter).draw(len(x), rng)
         if smc_files is not None:
             rows[SMC_ROW][cls] = smc_draws(post, smc_files.get(cls), cls)
         u = lf.to_unbounded(lf.quantities(x))
@@ -116,7 +126,11 @@ def main(argv=None) -> int:
     p.add_argument("--smc", nargs="?", const="", default=None, metavar="CLASS=FILE,...",
                    help="add the row of the smc route's draws (the posterior's where its route is smc, else "
                         "those kept beside it in FILE by `mdaug calibrate --check-route`)")
+    p.add_argument("--jitter", type=float, default=0.0, metavar="J",
+                   help="add the row of the draws resampled with a kernel jitter of J x each parameter's posterior sd")
     a = p.parse_args(argv)
+    if not (np.isfinite(a.jitter) and a.jitter >= 0):
+        p.error(f"--jitter: expected a number >= 0, got {a.jitter}")
 
     from sklearn.metrics import balanced_accuracy_score, recall_score
 
@@ -142,7 +156,7 @@ def main(argv=None) -> int:
     print(f"{'source of class vectors':36s} {'model':5s} {'select':>20s} {'new_large':>20s}")
     shuffle = np.random.default_rng(a.seed)
     smc_files = None if a.smc is None else smc_file_map(a.smc)
-    for row, per_class in vector_sources(a.study, shrinks, smc_files).items():  # each pool in random order, cycled
+    for row, per_class in vector_sources(a.study, shrinks, smc_files, a.jitter, a.seed).items():  # each pool in random order, cycled
         augs = [ModelAugmenter(FixedSource(shuffle.permutation(per_class[c]), c),
                                Renderer(acq[c], "peak", through_chain=True)) for c in CLASSES]
         ds = make_dataset(augs, a.n, a.seed, progress=False)
