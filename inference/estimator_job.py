@@ -299,7 +299,9 @@ def add_stacked(est: AmortizedEstimator, rows: dict, wanted: tuple[str, ...]) ->
     if "stacked" in wanted:
         from .diagnostics.stacking import stacked_row
 
-        rows["stacked"] = stacked_row(rows["smc"], rows["amortized"], est.stacking_weight)
+        lf = est.label_free
+        rows["stacked"] = stacked_row(rows["smc"], rows["amortized"], est.stacking_weight,
+                                      to_unbounded=lf.to_unbounded)
     for row in rows.values():  # the draws the mixture's widths needed are not stored
         row.pop("draws", None)
         row.pop("truths", None)

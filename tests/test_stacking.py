@@ -89,11 +89,14 @@ def test_the_stacked_rows_widths_are_the_mixtures_where_both_routes_kept_their_d
     assert row["width_over_truth"]["theta"] == pytest.approx(exact, rel=0.1)
     assert rows[0.5]["width_over_truth"]["theta"] < row["width_over_truth"]["theta"] < rows[2.0]["width_over_truth"][
         "theta"]
-    assert "width_over_truth" not in stacked_row(*_rows(50, 22, (0.5, 2.0)).values(), w)  # no draws, no widths
+    bare = stacked_row(*_rows(50, 22, (0.5, 2.0)).values(), w)
+    assert "width_over_truth" not in bare and "tarp_atc" not in bare  # no draws, no widths, no TARP
     # a table's rows: the stacked one derived with its widths, the draws dropped from every row before it is stored
     table = {"smc": rows[0.5], "amortized": rows[2.0]}
-    add_stacked(SimpleNamespace(stacking_weight=w), table, ("smc", "stacked"))
+    add_stacked(SimpleNamespace(stacking_weight=w, label_free=SimpleNamespace(to_unbounded=lambda q: q)), table,
+                ("smc", "stacked"))
     assert table["stacked"]["width_over_truth"] == row["width_over_truth"]
+    assert table["stacked"]["tarp_atc"] == pytest.approx(row["tarp_atc"])
     assert not any("draws" in r or "truths" in r for r in table.values())
     assert "width_over_truth" in trimmed_row({**table["stacked"], "verdict": "honest"})
 
@@ -119,3 +122,17 @@ def test_a_stacked_narrow_and_wide_route_is_honest_and_beats_both_where_the_weig
         stacked_row(same, other, 0.5)
     with pytest.raises(ValueError, match="weight must be in"):
         stacked_row(same, same, 1.0)
+
+
+def test_the_stacked_rows_tarp_is_its_mixtures():
+    """TARP of the mixture's own draws: near 0 for two exact routes stacked; negative (the
+    truth too often outside: overconfident) for a narrow route with itself, positive for a wide one."""
+    rows = _rows(400, 31, (0.5, 1.0, 2.0), keep_draws=True)
+    other = _rows(400, 31, (1.0,), draw_seed=10 ** 6, keep_draws=True)[1.0]  # the exact route's other draws
+    ident = lambda q: q  # noqa: E731
+    exact = stacked_row(rows[1.0], other, 0.5, to_unbounded=ident)
+    narrow = stacked_row(rows[0.5], rows[0.5], 0.5, to_unbounded=ident)
+    wide = stacked_row(rows[2.0], rows[2.0], 0.5, to_unbounded=ident)
+    assert abs(exact["tarp_atc"]) < 0.03 and exact["tarp_ks_p"] > 0.5
+    assert narrow["tarp_atc"] < -0.05 < 0.03 < wide["tarp_atc"]
+    assert narrow["tarp_atc"] == pytest.approx(rows[0.5]["tarp_atc"], abs=0.02)  # a route with itself: its own

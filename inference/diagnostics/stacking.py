@@ -55,7 +55,8 @@ def stacking_weight(log_p_a: np.ndarray, log_p_b: np.ndarray) -> float:
     return float(best[1])
 
 
-def stacked_row(row_a: dict, row_b: dict, weight: float, sources: tuple[str, str] = ("smc", "amortized")) -> dict:
+def stacked_row(row_a: dict, row_b: dict, weight: float, sources: tuple[str, str] = ("smc", "amortized"),
+                to_unbounded=None) -> dict:
     """The SBC summary of the mixture w a + (1 - w) b from the rows of routes a and b on
     the same drones (:func:`mdaug.inference.diagnostics.routes.run` summaries, with their
     ``ranks`` and ``log_score_by_drone``; module doc): outer-10% share, coverage at
@@ -65,7 +66,8 @@ def stacked_row(row_a: dict, row_b: dict, weight: float, sources: tuple[str, str
     (``draws`` and ``truths`` of :func:`~mdaug.inference.diagnostics.routes.run` with
     ``keep_draws``), the mixture's draws of each drone are the first round(w n) of a's and
     the first n - round(w n) of b's (each route's draws exchangeable), and the row has
-    ``width_over_truth``; else it has none. It never has TARP.
+    ``width_over_truth`` and TARP (on those draws, mapped by ``to_unbounded`` as
+    :func:`~mdaug.inference.diagnostics.routes.run` maps them); else it has neither.
     sources: the two routes' names, kept in the row (``derived_from``)."""
     from scipy import stats
 
@@ -96,11 +98,15 @@ def stacked_row(row_a: dict, row_b: dict, weight: float, sources: tuple[str, str
     seconds = np.asarray(row_a["seconds"], float) + np.asarray(row_b["seconds"], float)
     widths = {}
     if "draws" in row_a and "draws" in row_b:  # the mixture's own draws, drone by drone
-        from .routes import widths_over_truth
+        from .routes import tarp, widths_over_truth
 
         k = int(round(weight * n))
         mixed = np.concatenate([row_a["draws"][:k], row_b["draws"][:n - k]])
         widths["width_over_truth"] = widths_over_truth(mixed, row_a["truths"], names)
+        truths = np.asarray(row_a["truths"], float)
+        if to_unbounded is not None:
+            mixed, truths = np.stack([to_unbounded(d) for d in mixed]), to_unbounded(truths)
+        widths.update(tarp(mixed, truths))
     return {**widths, "names": names, "n_rank": n, "n_replicates": int(len(f)), "weight": float(weight),
             "pooled_p": float(stats.chi2.sf(chi2.sum(), 4 * len(chi2))), "outer_share": float(outer.mean()),
             "outer_share_by_quantity": dict(zip(names, map(float, outer.mean(0)))),

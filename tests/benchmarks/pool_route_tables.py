@@ -39,7 +39,8 @@ def _run(text: str) -> tuple[str, int, int]:
 
 
 def _tarp(row: dict) -> str:
-    """TARP ATC as printed: '-' for a row without one (a stacked row keeps no draws)."""
+    """TARP ATC as printed: '-' for a row without one (a stacked row derived where the routes'
+    draws were not kept, as in tables written before its TARP was)."""
     t = row.get("tarp_atc", float("nan"))
     return "-" if t != t else f"{t:.3f}"
 
@@ -52,7 +53,7 @@ def _pool(parts: list[dict], names: list[str], n_draws: int = 199) -> dict:
     n = sum(p["n_replicates"] for p in parts)
     cov = {q: sum(p["coverage_by_quantity"][q]["0.90"] * p["n_replicates"] for p in parts) / n for q in names}
     row = {k: sum(p.get(k, float("nan")) * p["n_replicates"] for p in parts) / n
-           for k in ("outer_share", "log_score", "tarp_atc")}  # a stacked row has no TARP (its draws are not kept)
+           for k in ("outer_share", "log_score", "tarp_atc")}  # nan where a part has no TARP
     row.update(coverage90_range=[min(cov.values()), max(cov.values())], n_replicates=n,
                lowest=sorted(cov.items(), key=lambda t: t[1])[:4],
                exact_fail_chance=exact_fail_chance(n, len(names), n_draws), n_draws=n_draws)
