@@ -31,11 +31,12 @@ def _diff(c: dict) -> str:
     return f"{signed(c['difference'], c['ci'])}"
 
 
-def _against(results, w, a: str, b: str, test: str, b_text: str) -> str:
-    c = comparison(results, test, a, b)
-    if c is None:
-        return ""
-    return f"against {b_text}, {w.esc(a)} is {c['word']}: {_diff(c)}"
+def _against(results, w, names: list[str], b: str, test: str, b_text: str) -> str:
+    """'against B (score), a is better: +0.1 [...] and c is level: ...' (b_text once, however
+    many strategies are compared with it); '' where no comparison was made."""
+    cs = [(a, comparison(results, test, a, b)) for a in names]
+    words = [f"{w.esc(a)} is {c['word']}: {_diff(c)}" for a, c in cs if c is not None]
+    return f"against {b_text}, {join(words)}" if words else ""
 
 
 def finding(results: dict, w=Html(), j: dict | None = None) -> list[str]:
@@ -91,9 +92,9 @@ def finding(results: dict, w=Html(), j: dict | None = None) -> list[str]:
             s1 += f"; {w.esc(tied[0])} minus {w.esc(tied[1])}: {_diff(c)}, {c['word']}." if c else "."
     sentences = [s1]
     parts = []
-    for n in tied:
-        if "tsaug" in strategies and n != "tsaug" and test in strategies["tsaug"]["tests"]:
-            parts.append(_against(results, w, n, "tsaug", test, f"tsaug ({_score(results, w, 'tsaug', test)})"))
+    if "tsaug" in strategies and test in strategies["tsaug"]["tests"]:
+        parts.append(_against(results, w, [n for n in tied if n != "tsaug"], "tsaug", test,
+                              f"tsaug ({_score(results, w, 'tsaug', test)})"))
     ceil = j.get("ceiling")
     if ceil:
         model = ceil["model"]
@@ -105,9 +106,8 @@ def finding(results: dict, w=Html(), j: dict | None = None) -> list[str]:
                          "acquisition leaves its classifier nothing to learn on this set, so no strategy's score "
                          "can be read against it")
         else:
-            for n in tied:
-                parts.append(_against(results, w, n, f"ceiling:{model}", test,
-                                      f"the ceiling of the simulated scene ({how})"))
+            parts.append(_against(results, w, tied, f"ceiling:{model}", test,
+                                  f"the ceiling of the simulated scene ({how})"))
     parts = [p for p in parts if p]
     if parts:
         text = "; ".join(parts)

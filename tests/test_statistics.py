@@ -232,6 +232,10 @@ def test_three_strategies_tied_on_the_selection_set_are_reported_as_tied(tmp_pat
     assert "does not separate" in text and "a tie is reported, not broken" in text
     for name in best["tied"]:
         assert f"**{name}**" in text
+    # each comparator is named once, every tied strategy compared with it
+    assert text.count("gainst tsaug (") == 1 and text.count("the ceiling of the simulated scene (") == 1
+    for name in best["tied"]:
+        assert f"{name} is " in text.split("gainst tsaug (")[1].split("; against")[0]
     check_agreement(results)
     # their selection-set comparisons are exactly level
     d = verdicts.comparison(results, "select", "sigma_p_fit", "posterior")
