@@ -4,21 +4,20 @@ Method (as many vectors as asked, even beyond the chain's length): a bootstrap o
 stored draws. Each new vector is a uniformly resampled posterior draw; the acquisition
 that renders it draws fresh phases, noise, carrier and range jitter where it has them,
 so repeated draws give distinct profiles (under an acquisition without such nuisances,
-the same profile). ``jitter`` > 0 makes it a smoothed bootstrap: Gaussian
-kernel jitter of ``jitter`` x the posterior sd of every parameter (phases: x the
-circular sd, then wrapped; the fixed Gamma of engine 0: no jitter; non-negative
-parameters that jitter below zero are reflected, |x|). The default is no jitter: the
-kernel's width comes from the marginal sd, which for a posterior with several modes in
-the lines (a sideband fits nearly as well as the line) spans the modes, not one mode.
-On the default study's
+the same profile). ``jitter`` > 0 makes it a smoothed bootstrap: Gaussian kernel jitter
+of ``jitter`` x the posterior sd of every parameter (phases: x the circular sd, then
+wrapped; the fixed Gamma of engine 0: no jitter; non-negative parameters that jitter
+below zero are reflected, |x|). The default is no jitter: the kernel's width comes from
+the marginal sd, which for a posterior with several modes in the lines (a sideband fits
+nearly as well as the line) spans the modes, not one mode. On the default study's
 posteriors (QUAD's brightest engine: its lines' marginal sd 0.25-0.65 x their median,
 its amplitudes' 0.71-1.09), XGBoost / SVM trained on 1,000 renders per class scored
 0.861 / 0.702 on ``new_large`` without jitter against 0.728 / 0.539 with 0.1 (QUAD
 recall 0.80 / 0.44 against 0.49 / 0.08; ``python tests/benchmarks/calibration_gap.py DIR
---jitter 0.1``), and the study's ``posterior`` CNN 0.85 against 0.64. Phases of draw i come from the
-measurement the resampled draw was paired with (all measurements used evenly); a
-marginal posterior holds no phases, and the acquisition that renders the vectors draws
-them.
+--jitter 0.1``), and the study's ``posterior`` CNN 0.85 against 0.64. Phases of draw i
+come from the measurement the resampled draw was paired with (all measurements used
+evenly); a marginal posterior holds no phases, and the acquisition that renders the
+vectors draws them.
 
 The vectors are rendered by a :class:`~mdaug.generator.augment.Renderer` under an
 acquisition: by default the one the posterior was calibrated under, with the
