@@ -31,6 +31,13 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+DRAWS_REVISION = 1
+"""Raised whenever a strategy's source draws other vectors for the same settings; the
+study's candidate and CNN stages are keyed on it, so a study folder made before the
+change computes them again instead of resuming stale ones (its data and calibrations
+are kept). 1: the posterior's draws resampled as they are (before: with a kernel jitter
+of 0.1 x each parameter's posterior sd)."""
+
 MIN_GROUPS = 5
 """A grouped 80/10/10 split needs a few source profiles per class; with fewer, the
 tsaug set's groups are dropped (the validation split then holds copies of training

@@ -40,7 +40,7 @@ import numpy as np
 
 from ..radar import atomic_savez, load_profiles
 from ..radar.seeds import child_seed
-from ..strategies import STRATEGIES, TrainingSpec, training_set
+from ..strategies import DRAWS_REVISION, STRATEGIES, TrainingSpec, training_set
 from . import jobs, statistics, verdicts
 from .cache import StageCache, settings_key
 from .config import StudyConfig
@@ -79,7 +79,8 @@ class Study(TrainingStages):
         self.calib_key = settings_key(self.key, c["quick"], p["calibration"])
         self.cand_key = settings_key(self.calib_key, [p[k] for k in ("sigma_p", "specimen_widths", "models",
                                                                      "sweep_n_per_class", "strategies",
-                                                                     "through_chain", "normalisation", "n_boot")])
+                                                                     "through_chain", "normalisation", "n_boot")],
+                                     DRAWS_REVISION)
         self.cnn_key = settings_key(self.cand_key, [p[k] for k in ("cnn_n_per_class", "cnn_epochs", "cnn_patience",
                                                                    "tsaug_n_per_class", "tsaug_epochs",
                                                                    "cnn_precision")])

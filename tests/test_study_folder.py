@@ -136,3 +136,17 @@ def test_a_stage_record_of_another_shape_is_computed_again(tmp_path):
     got = StageCache(tmp_path, log=said.append).run("calibrate_HELI", "k", lambda: {"posterior": "p"},
                                                     needs=("posterior",))
     assert got == {"posterior": "p"} and any("lacks ['posterior']" in s for s in said), said
+
+
+def test_a_change_in_what_a_strategy_draws_recomputes_candidates_and_cnns_not_data(tmp_path, monkeypatch):
+    """A folder made before a release that changed a strategy's source (DRAWS_REVISION)
+    keeps its data and calibrations and computes its candidates and CNNs again."""
+    import mdaug.reports.study as study_mod
+    from mdaug.reports.config import StudyConfig
+
+    cfg = StudyConfig(seed=7).quick_version()
+    now = study_mod.Study(cfg, tmp_path / "now", log=lambda *_: None)
+    monkeypatch.setattr(study_mod, "DRAWS_REVISION", study_mod.DRAWS_REVISION + 1)
+    later = study_mod.Study(cfg, tmp_path / "later", log=lambda *_: None)
+    assert (later.key, later.calib_key) == (now.key, now.calib_key)
+    assert later.cand_key != now.cand_key and later.cnn_key != now.cnn_key
