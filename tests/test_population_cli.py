@@ -46,7 +46,12 @@ def test_calibrate_population_keeps_each_drone_and_reuses_it(drones, capsys):
 
 def test_population_from_the_trained_estimator_by_default(drones, capsys):
     """--population on measured (K = 4) acquisitions: each drone's posterior is the shipped
-    estimator's (seconds, no chain), the population is built on them, a rerun reuses them."""
+    estimator's, by the route its file names (HELI K = 4: the smc route on its summary
+    likelihood, seconds, no chain), the population is built on them, a rerun reuses them."""
+    from mdaug.inference.amortized.estimator import AmortizedEstimator
+    from mdaug.inference.amortized.shipped import shipped_path
+
+    route = AmortizedEstimator.load(shipped_path("HELI", 4)).default_route
     out = drones / "pop_amortized.npz"
     assert main(["calibrate", str(drones / "d.npz"), "--class", "HELI", "--population", "--seed", "4",
                  "--out", str(out)]) == 0
@@ -54,7 +59,7 @@ def test_population_from_the_trained_estimator_by_default(drones, capsys):
     assert "population of HELI: 2 drone(s) (0, 1)" in text
     from mdaug.inference.result.posterior import CalibrationResult
     drone = CalibrationResult.load(drones / "pop_amortized.npz.drone-0.nc")
-    assert drone.amortized and drone.specimens == ["0"] and drone.diagnostics["sampler"] == "amortized"
+    assert route == "smc" and drone.amortized and drone.specimens == ["0"] and drone.diagnostics["sampler"] == route
     pop = PopulationResult.load(out, class_name="HELI")
     assert pop.n_drones == 2 and pop.spreads().shape[1] == 5 and np.all(pop.spreads() > 0)
     assert main(["calibrate", str(drones / "d.npz"), "--class", "HELI", "--population", "--seed", "4",
