@@ -96,18 +96,18 @@ def stacked_row(row_a: dict, row_b: dict, weight: float, sources: tuple[str, str
     chi2 = ((counts - len(f) / 5) ** 2 / (len(f) / 5)).sum(axis=1)  # F's histogram, as the ranks' (sbc.summarise)
     cov90 = [v["0.90"] for v in per.values()]
     seconds = np.asarray(row_a["seconds"], float) + np.asarray(row_b["seconds"], float)
-    widths = {}
+    from_draws = {}  # widths and TARP, where the mixture has draws of its own
     if "draws" in row_a and "draws" in row_b:  # the mixture's own draws, drone by drone
         from .routes import tarp, widths_over_truth
 
         k = int(round(weight * n))
         mixed = np.concatenate([row_a["draws"][:k], row_b["draws"][:n - k]])
-        widths["width_over_truth"] = widths_over_truth(mixed, row_a["truths"], names)
+        from_draws["width_over_truth"] = widths_over_truth(mixed, row_a["truths"], names)
         truths = np.asarray(row_a["truths"], float)
         if to_unbounded is not None:
             mixed, truths = np.stack([to_unbounded(d) for d in mixed]), to_unbounded(truths)
-        widths.update(tarp(mixed, truths))
-    return {**widths, "names": names, "n_rank": n, "n_replicates": int(len(f)), "weight": float(weight),
+        from_draws.update(tarp(mixed, truths))
+    return {**from_draws, "names": names, "n_rank": n, "n_replicates": int(len(f)), "weight": float(weight),
             "pooled_p": float(stats.chi2.sf(chi2.sum(), 4 * len(chi2))), "outer_share": float(outer.mean()),
             "outer_share_by_quantity": dict(zip(names, map(float, outer.mean(0)))),
             "coverage": pooled, "coverage_by_quantity": per, "coverage90_range": [min(cov90), max(cov90)],
