@@ -40,7 +40,7 @@ likelihood where the file has one, else the ratio network's; :mod:`.tempered`), 
 two stacked: the mixture w smc + (1 - w) amortized, w the file's stacking weight (meta
 field ``stacking``, :mod:`mdaug.inference.diagnostics.stacking`; only a file that states
 one has this route). (nlopt + emcee started from the amortized draws lost to both on
-every row of the route tables, docs/calibration.md, and left the package.)"""
+every row of the route tables, docs/calibration-history.md, and left the package.)"""
 MAX_TEMPERATURE = 4.0
 """Largest flow temperature a file may state (a posterior four times wider than trained
 says little more than the prior; :mod:`mdaug.inference.temperature` searches 1-2)."""

@@ -29,7 +29,7 @@ the self-check's drones, with the moves: outer-10% share 0.257 where an exact sa
 gives 0.10, and no truth in a hole the particles missed). Slower tempering with longer
 rejuvenation, :data:`~mdaug.inference.samplers.smc.THOROUGH_ROUTE` (0.9, 0.99, 60),
 took the same drones to 0.114 at 151 s a drone; either half alone to 0.195-0.276
-(docs/calibration.md, "QUAD's sampler").
+(docs/calibration-history.md, "QUAD's sampler").
 """
 from __future__ import annotations
 
@@ -70,7 +70,7 @@ def route_knobs(settings, est) -> dict:
 
 MOVES = {"redraw": 0.15, "quantity_redraw": 0.15, "line_move": 0.1, "engine_swap": 0.1}
 """The moves across the golf course at the shares measured (:func:`sample_tempered`'s
-keywords; docs/calibration.md, "where the sampler went wrong"), which the SMC plugin's
+keywords; docs/calibration-history.md, "where the sampler went wrong"), which the SMC plugin's
 ``route_moves`` turns on for the route. Not the route's default:
 on HELI's route table (200 fresh prior drones) they left the gate where it was (outer
 share 0.106 against 0.113, one quantity's coverage 0.84 against 0.85, which the gate's

@@ -282,7 +282,7 @@ def raise_widening(widening: dict, power: float = 1.0, scale: float = 1.0) -> di
     (w near 1: the drones near the class reference it was trained on densely) as much as
     where it found it wrong. A power > 1 widens most where the fitted w is already
     largest and leaves drones the fit put at w = 1 at 1: one extra number, chosen like
-    the scale by the route's SBC on held-out drones (docs/calibration.md, HELI K = 32).
+    the scale by the route's SBC on held-out drones (docs/calibration-history.md, HELI K = 32).
     ``model.widen`` still clips log w to [0, 5], so the result is max(1, w_raw^power x
     scale), w_raw the fit before its clip. ``raise_widening(w, 1 / p, s ** (-1 / p))``
     undoes ``raise_widening(w, p, s)``."""

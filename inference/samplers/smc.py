@@ -127,7 +127,7 @@ THOROUGH_ROUTE = {"route_moves": True, "route_ess": 0.9, "route_p_move": 0.99, "
                   "n_particles": 1000}
 """The smc route's knobs, its particle count included (``CalibrationSettings().with_plugin("smc",
 **THOROUGH_ROUTE)``), at which QUAD's self-check came near an exact sampler's: 0.114 outer-10%
-share on 12 drones at 151 s a drone (docs/calibration.md, "QUAD's sampler")."""
+share on 12 drones at 151 s a drone (docs/calibration-history.md, "QUAD's sampler")."""
 
 
 def posterior_target(post):

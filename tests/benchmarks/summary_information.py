@@ -26,7 +26,7 @@ by about N / (N - p) (1.09 for 256 of 3,000). The split-half line (J and S from 
 the draws alone) shows how far the figures move. A marginal bound also depends on how the
 slopes line up with each other, and noisy slopes of faintly seen quantities look more
 independent than they are: where a quantity's slope is not well above its noise, the other
-quantities' bounds come out too narrow (docs/calibration.md, HELI K = 32: at 3,000 draws this
+quantities' bounds come out too narrow (docs/calibration-history.md, HELI K = 32: at 3,000 draws this
 does not settle line 3).
 """
 from __future__ import annotations
