@@ -352,10 +352,10 @@ def test_refit_widening_raises_the_files_own_fit_without_simulating(tmp_path, ca
     for key in ("intercept", "slope", "quadratic"):
         assert back[key] == pytest.approx(w0[key])
     capsys.readouterr()
-    with pytest.raises(SystemExit) as exc:  # K = 1 ships no summary likelihood
-        bench.main(["--class", "HELI", "--ramps", "1", *none, "--out", str(tmp_path / "k1.zip")])
+    with pytest.raises(SystemExit) as exc:  # QUAD K = 1 ships no summary likelihood
+        bench.main(["--class", "QUAD", "--ramps", "1", *none, "--out", str(tmp_path / "k1.zip")])
     err = capsys.readouterr().err
-    assert exc.value.code == 2 and "heli-k1.zip" in err and "summary likelihood" in err
+    assert exc.value.code == 2 and "quad-k1.zip" in err and "summary likelihood" in err
     assert not (tmp_path / "k1.zip").exists()
 
 
