@@ -261,14 +261,22 @@ def name_default_route(sbc: dict) -> None:
     """Name the default route of an estimator's SBC record (in place): among the routes
     that pass the gate on the route table's prior drones, the best log score on its
     specimen drones where it has them (drones like a user's), else on the prior drones
-    (:func:`mdaug.inference.diagnostics.routes.default_route`); 'amortized' when none passes."""
+    (:func:`mdaug.inference.diagnostics.routes.default_route`); 'amortized' when none passes.
+    ``default_by`` says why: the log score that chose among several passing routes, or that
+    one route alone passed."""
     from .diagnostics.routes import default_route
+    from .result.status import honest
 
     table, spec = sbc["route_table"], sbc.get("specimens")
     best = default_route(table["rows"], spec["rows"] if spec else None)
     table["default"] = best or "amortized"
-    table["default_by"] = (f"log score on {spec['drones']} specimen drones" if spec else
-                           f"log score on {table['drones']} prior drones") if best else "no route passes the gate"
+    if best is None:
+        table["default_by"] = "no route passes the gate"
+    elif sum(honest(r) for r in table["rows"].values()) == 1:
+        table["default_by"] = f"the only route that passes the gate on {table['drones']} prior drones"
+    else:
+        table["default_by"] = (f"log score on {spec['drones']} specimen drones" if spec else
+                               f"log score on {table['drones']} prior drones")
 
 
 def sampled_routes(est: AmortizedEstimator) -> tuple[str, ...]:

@@ -507,7 +507,8 @@ def test_train_estimator_and_sbc_verbs(tmp_path, capsys, refused):
     assert set(data["specimens"]["rows"]) == {"amortized", "smc"} and data["specimens"]["drones"] == 2
     table = data["route_table"]
     assert table["default"] in ("amortized", "smc") and table["default_by"] in (
-        "log score on 2 specimen drones", "no route passes the gate")
+        "log score on 2 specimen drones", "no route passes the gate",
+        "the only route that passes the gate on 2 prior drones")
     assert f"HELI K=4 default route: {table['default']} ({table['default_by']})" in text
     assert "HELI K=4 smc on 2 specimen drones: log score" in text
     assert table["route_settings"] == data["specimens"]["route_settings"] == {
@@ -582,7 +583,7 @@ def test_sbc_stored_prints_what_the_shipped_file_says_and_simulates_nothing(tmp_
     assert f"QUAD K=32 stacked on 20 specimen drones: log score {stacked:.2f} (exact), lines' median 90% " \
            f"width / truth {widths} " in text  # the mixture's widths, from both routes' draws
     assert stacked < data["specimens"]["rows"]["amortized"]["log_score"]  # why it is the default
-    assert "QUAD K=32 default route: stacked (log score on 20 specimen drones)" in text
+    assert "QUAD K=32 default route: stacked (the only route that passes the gate on 200 prior drones)" in text
     table = next(line for line in text.splitlines() if line.startswith("QUAD K=32 route table on 200 drones: "))
     assert "amortized overconfident" in table and "smc overconfident" in table and "stacked honest" in table
 

@@ -452,6 +452,10 @@ def test_the_default_route_passes_on_the_prior_and_is_sharpest_where_users_are()
     name_default_route(sbc)
     assert (sbc["route_table"]["default"], sbc["route_table"]["default_by"]) == ("amortized",
                                                                                 "no route passes the gate")
+    sbc["route_table"]["rows"] = {"smc": prior["smc"], "narrow": prior["narrow"]}  # one passes: it says so
+    name_default_route(sbc)
+    assert (sbc["route_table"]["default"], sbc["route_table"]["default_by"]) == (
+        "smc", "the only route that passes the gate on 200 prior drones")
 
 
 def test_the_emulator_ensemble_is_the_mean_of_its_members_and_old_files_load_as_one():
