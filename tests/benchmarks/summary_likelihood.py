@@ -1,7 +1,7 @@
 """Give a shipped estimator its summary likelihood and its route table.
 
 python tests/benchmarks/summary_likelihood.py --class HELI --ramps 32 --prior DIR --near DIR \
-    [--model PREFIX | --save-model PREFIX] [--route-truths 40] [--specimens 20] [--time-budget 60] \
+    [--model PREFIX | --save-model PREFIX] [--no-widening] [--route-truths 40] [--specimens 20] [--time-budget 60] \
     [--workers 2] [--seed 7] [--moves | --thorough] --out FILE
 python tests/benchmarks/summary_likelihood.py --class HELI --ramps 32 --from-file FILE [...] --out FILE2
    (the route table of a file that already carries its summary likelihood)
@@ -65,7 +65,7 @@ def main(argv=None) -> int:
     from mdaug.inference.amortized.shipped import find
     from mdaug.inference.amortized.simulate import load_shards
     from mdaug.inference.emulator.model import from_parts, to_parts
-    from mdaug.inference.emulator.train import train_summary_model
+    from mdaug.inference.emulator.train import EmulatorConfig, train_summary_model
     from mdaug.inference.estimator_job import adopt_route_table, estimator_sbc, name_default_route, specimen_table
     from mdaug.inference.samplers.smc import THOROUGH_ROUTE
     from mdaug.inference.settings import CalibrationSettings
@@ -78,6 +78,10 @@ def main(argv=None) -> int:
     ap.add_argument("--from-file", default=None)
     ap.add_argument("--model", default=None)
     ap.add_argument("--save-model", default=None)
+    ap.add_argument("--no-widening", action="store_true",
+                    help="train without the widening fit (w = 1; EmulatorConfig(n_widening=0)): QUAD's 35 "
+                         "dimensions, where BOBYQA alone stops short of the global maximum, take theirs from "
+                         "refit_widening.py --maximum smc")
     ap.add_argument("--route-truths", type=int, default=40)
     ap.add_argument("--specimens", type=int, default=20)
     ap.add_argument("--time-budget", type=float, default=60.0)
@@ -118,8 +122,9 @@ def main(argv=None) -> int:
                 x, y = x[:-1000], y[:-1000]
             xs.append(x)
             ys.append(y)
+        config = EmulatorConfig(n_widening=0) if a.no_widening else EmulatorConfig()
         model, report = train_summary_model(np.concatenate(xs), np.concatenate(ys), lf, a.cls, est.spec.acquisition,
-                                            est.spec.radar, seed=a.seed)
+                                            est.spec.radar, config, seed=a.seed)
         report.update(prior_drones=int(len(xs[0])), near_drones=int(len(xs[1])), near_width=4.0)
         if a.save_model:
             meta, state = to_parts(model, report)
