@@ -52,10 +52,13 @@ def main(argv=None) -> int:
         head = f"{'seed':>5}  " + "  ".join(f"{n[:19]:>19}" for n in names)
         print(head)
         table = {n: [] for n in names}
-        for path, r in runs:
+        chosen = []  # per study: the chosen strategy's score (tied ones averaged)
+        for _, r in runs:
             seed = r["config"].get("seed", "?")
-            best = set((r.get("best_strategy") or {}).get("tied") or [])
             row = _row(r, test)
+            best = [n for n in (r.get("best_strategy") or {}).get("tied") or [] if n in row]
+            if best:
+                chosen.append(float(np.mean([row[n][0] for n in best])))
             cells = []
             for n in names:
                 if n not in row:
@@ -70,9 +73,6 @@ def main(argv=None) -> int:
         print(f"{'mean':>5}  " + "  ".join(f"{np.mean(v):>19.3f}" if v else f"{'-':>19}" for v in table.values()))
         print(f"{'range':>5}  " + "  ".join(f"{min(v):>13.3f}-{max(v):.3f}" if v else f"{'-':>19}"
                                               for v in table.values()))
-        chosen = [np.mean([row[n][0] for n in (r.get("best_strategy") or {}).get("tied") or [] if n in row])
-                  for r in (rr for _, rr in runs) for row in [_row(r, test)]
-                  if any(n in row for n in (r.get("best_strategy") or {}).get("tied") or [])]
         if chosen:
             print(f"the chosen strategy (tied ones averaged): mean {np.mean(chosen):.3f}, "
                   f"{min(chosen):.3f}-{max(chosen):.3f} over {len(chosen)} studies")
