@@ -205,6 +205,15 @@ def run_sbc(args) -> int:
     from ..radar.progress import progress_enabled
     from .guard import Output, check_paths
 
+    if args.class_name is None or args.ramps is None:
+        given = [f"--{n} {v}" for n, v in (("estimator", args.estimator), ("json", args.json),
+                                            ("figure", args.figure)) if v is not None]
+        if args.stored and args.class_name is None and args.ramps is None and not given:
+            _print_shipped()
+            return 0
+        raise ValueError("--class and --ramps: both are needed"
+                         + (f" (with {', '.join(given)})" if given else "")
+                         + "; `mdaug sbc --stored` alone lists every shipped estimator")
     cls = _class(args.class_name)
     check_estimator_sizes(args)
     check_paths(inputs=[("--estimator", args.estimator)], outputs=[Output("--json", args.json, "json"),
@@ -248,6 +257,45 @@ def run_sbc(args) -> int:
         atomic_write(args.json, lambda fh: fh.write(text.encode()))
         result(f"wrote {args.json}")
     return 0
+
+
+def _print_shipped() -> None:
+    """``mdaug sbc --stored`` alone: one row per shipped estimator file, its default
+    route's SBC as stored (fresh prior drones) with the gate's word, and where the file
+    stores them, that route's log score and brightest-engine lines on drones like a
+    user's (the specimen model around the class reference). Simulates nothing."""
+    from ..inference.amortized.estimator import AmortizedEstimator
+    from ..inference.amortized.shipped import DATA, available
+    from ..inference.result.status import honest
+
+    result(f"the shipped estimators ({DATA}): each file's default route, its SBC on fresh prior drones as "
+           "stored, and on drones like a user's where stored (log score in nats, lower is better; the "
+           "brightest engine's lines 1-4, median 90% width / truth)")
+    result(f"{'file':13s} {'route':9s} {'drones':>6s} {'outer':>6s} {'cov90':>9s} {'log score':>9s}  "
+           f"{'gate':13s} {'users':>5s} {'log score':>9s}  lines 1-4")
+    def by_class_and_k(stem: str):
+        cls, _, k = stem.partition("-k")
+        return cls, int(k) if k.isdigit() else 0
+
+    for stem in sorted(available(), key=by_class_and_k):
+        est = AmortizedEstimator.load(DATA / f"{stem}.zip")
+        route = est.default_route
+        sbc = est.meta.get("sbc") or {}
+        s = sbc.get(route) or {}
+        if "coverage90_range" not in s:
+            result(f"{stem + '.zip':13s} {route:9s} (no SBC stored for this route)")
+            continue
+        lo, hi = s["coverage90_range"]
+        score = f"{s['log_score']:9.2f}" if "log_score" in s else f"{'-':>9s}"
+        spec = (sbc.get("specimens") or {})
+        row = (spec.get("rows") or {}).get(route)
+        lines = [v for k, v in (row or {}).get("width_over_truth", {}).items() if " w[" in k][:4]
+        users = (f"{spec['drones']:5d} {row['log_score']:9.2f}  " + (" ".join(f"{v:.2f}" for v in lines) or "-")
+                 if row else f"{'-':>5s} {'-':>9s}  -")
+        result(f"{stem + '.zip':13s} {route:9s} {s['n_replicates']:6d} {s['outer_share']:6.3f} {lo:4.2f}-{hi:4.2f} "
+               f"{score}  {'honest' if honest(s) else 'overconfident':13s} {users}")
+    result("`mdaug sbc --class C --ramps K --stored` prints one file's every route, its route table and how its "
+           "default was named")
 
 
 def _print_sbc(cls: str, ramps: int, out: dict) -> None:
@@ -345,8 +393,10 @@ def add_sbc(sub, parents, help):
                  description="Simulation-based calibration of an estimator on fresh simulated drones (5 "
                              "measurements each): outer-10% share (0.10 when honest), 90% coverage, rank "
                              "chi-square, TARP, and the median 90% width over the truth beside the prior's.")
-    p.add_argument("--class", dest="class_name", required=True, metavar="CLASS", help="HELI or QUAD")
-    p.add_argument("--ramps", type=positive_int, required=True, metavar="K", help="ramps per frame of the data")
+    p.add_argument("--class", dest="class_name", default=None, metavar="CLASS",
+                   help="HELI or QUAD (no default: needed, except with --stored alone)")
+    p.add_argument("--ramps", type=positive_int, default=None, metavar="K",
+                   help="ramps per frame of the data (no default: needed, except with --stored alone)")
     p.add_argument("--estimator", type=Path, default=None, help="estimator ZIP (default: the shipped one)")
     p.add_argument("--truths", type=positive_int, default=300, metavar="N",
                    help="fresh simulated drones, 5 measurements each (default: %(default)s)")
@@ -367,7 +417,8 @@ def add_sbc(sub, parents, help):
                    help="write the rank histograms and coverage curves (default: none)")
     p.add_argument("--stored", action="store_true",
                    help="print the SBC, route table and specimen rows the estimator file stores (how its default "
-                        "route was named) and simulate nothing")
+                        "route was named) and simulate nothing; without --class and --ramps, one row per shipped "
+                        "estimator")
     p.set_defaults(func=run_sbc)
     return p
 

@@ -588,6 +588,32 @@ def test_sbc_stored_prints_what_the_shipped_file_says_and_simulates_nothing(tmp_
     assert "amortized overconfident" in table and "smc overconfident" in table and "stacked honest" in table
 
 
+def test_sbc_stored_alone_lists_every_shipped_file_by_its_default_route(capsys, tmp_path, refused):
+    """`mdaug sbc --stored` without --class and --ramps: one row per shipped file, its
+    default route's stored SBC with the gate's word, in class and K order."""
+    from mdaug.cli import main
+    from mdaug.inference.amortized.estimator import AmortizedEstimator
+    from mdaug.inference.amortized.shipped import DATA, available
+    from mdaug.inference.result.status import honest
+
+    assert main(["sbc", "--stored"]) == 0
+    rows = [ln for ln in capsys.readouterr().out.splitlines() if ln.split(" ")[0].endswith(".zip")]
+    assert [r.split()[0] for r in rows] == sorted((f"{s}.zip" for s in available()),
+                                                  key=lambda n: (n.split("-k")[0], int(n[:-4].split("-k")[1])))
+    for r in rows:
+        est = AmortizedEstimator.load(DATA / r.split()[0])
+        s = est.meta["sbc"][est.default_route]
+        assert r.split()[1:4] == [est.default_route, str(s["n_replicates"]), f"{s['outer_share']:.3f}"]
+        assert ("overconfident" in r) == (not honest(s))
+    heli32 = next(r for r in rows if r.startswith("heli-k32.zip"))
+    assert "smc" in heli32 and "honest" in heli32 and heli32.split()[-4:] == ["0.99", "0.71", "0.58", "0.25"]
+    # --class or --ramps alone, or a file given: one line saying both are needed, nothing written
+    inputs, out = _folders(tmp_path)
+    refused(["sbc", "--class", "HELI", "--stored"], inputs, out,
+            ["--class and --ramps: both are needed", "`mdaug sbc --stored` alone lists every shipped estimator"])
+    refused(["sbc", "--stored", "--json", str(out / "s.json")], inputs, out, ["(with --json"])
+
+
 def test_sbc_stored_refuses_a_file_without_sbc_and_a_figure(tiny, tmp_path, refused):
     _, path = tiny  # trained with sbc_truths=0: no SBC stored
     inputs, out = _folders(tmp_path)
