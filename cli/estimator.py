@@ -268,9 +268,9 @@ def _print_shipped() -> None:
     from ..inference.amortized.shipped import DATA, available
     from ..inference.result.status import honest
 
-    result(f"the shipped estimators ({DATA}): each file's default route, its SBC on fresh prior drones as "
-           "stored, and on drones like a user's where stored (log score in nats, lower is better; the "
-           "brightest engine's lines 1-4, median 90% width / truth)")
+    result("the shipped estimators (mdaug's inference/amortized/data/): each file's default route and its SBC")
+    result("on fresh prior drones as stored; on drones like a user's, where stored, its log score (nats, lower")
+    result("is better) and the brightest engine's lines 1-4 (median 90% width / truth)")
     result(f"{'file':13s} {'route':9s} {'drones':>6s} {'outer':>6s} {'cov90':>9s} {'log score':>9s}  "
            f"{'gate':13s} {'users':>5s} {'log score':>9s}  lines 1-4")
     def by_class_and_k(stem: str):

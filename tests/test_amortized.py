@@ -591,13 +591,17 @@ def test_sbc_stored_prints_what_the_shipped_file_says_and_simulates_nothing(tmp_
 def test_sbc_stored_alone_lists_every_shipped_file_by_its_default_route(capsys, tmp_path, refused):
     """`mdaug sbc --stored` without --class and --ramps: one row per shipped file, its
     default route's stored SBC with the gate's word, in class and K order."""
+    from pathlib import Path
+
     from mdaug.cli import main
     from mdaug.inference.amortized.estimator import AmortizedEstimator
     from mdaug.inference.amortized.shipped import DATA, available
     from mdaug.inference.result.status import honest
 
     assert main(["sbc", "--stored"]) == 0
-    rows = [ln for ln in capsys.readouterr().out.splitlines() if ln.split(" ")[0].endswith(".zip")]
+    printed = capsys.readouterr().out
+    assert printed.strip() in (Path(__file__).parents[1] / "README.md").read_text()  # the README quotes it whole
+    rows = [ln for ln in printed.splitlines() if ln.split(" ")[0].endswith(".zip")]
     assert [r.split()[0] for r in rows] == sorted((f"{s}.zip" for s in available()),
                                                   key=lambda n: (n.split("-k")[0], int(n[:-4].split("-k")[1])))
     for r in rows:
