@@ -207,7 +207,8 @@ def run_sbc(args) -> int:
 
     if args.class_name is None or args.ramps is None:
         given = [f"--{n} {v}" for n, v in (("estimator", args.estimator), ("json", args.json),
-                                            ("figure", args.figure)) if v is not None]
+                                            ("figure", args.figure), ("route-truths", args.route_truths or None),
+                                            ("specimens", args.specimens or None)) if v is not None]
         if args.stored and args.class_name is None and args.ramps is None and not given:
             _print_shipped()
             return 0
@@ -273,6 +274,7 @@ def _print_shipped() -> None:
     result("is better) and the brightest engine's lines 1-4 (median 90% width / truth)")
     result(f"{'file':13s} {'route':9s} {'drones':>6s} {'outer':>6s} {'cov90':>9s} {'log score':>9s}  "
            f"{'gate':13s} {'users':>5s} {'log score':>9s}  lines 1-4")
+
     def by_class_and_k(stem: str):
         cls, _, k = stem.partition("-k")
         return cls, int(k) if k.isdigit() else 0
@@ -287,10 +289,10 @@ def _print_shipped() -> None:
             continue
         lo, hi = s["coverage90_range"]
         score = f"{s['log_score']:9.2f}" if "log_score" in s else f"{'-':>9s}"
-        spec = (sbc.get("specimens") or {})
-        row = (spec.get("rows") or {}).get(route)
+        specimens = sbc.get("specimens") or {}
+        row = (specimens.get("rows") or {}).get(route)
         lines = [v for k, v in (row or {}).get("width_over_truth", {}).items() if " w[" in k][:4]
-        users = (f"{spec['drones']:5d} {row['log_score']:9.2f}  " + (" ".join(f"{v:.2f}" for v in lines) or "-")
+        users = (f"{specimens['drones']:5d} {row['log_score']:9.2f}  " + (" ".join(f"{v:.2f}" for v in lines) or "-")
                  if row else f"{'-':>5s} {'-':>9s}  -")
         result(f"{stem + '.zip':13s} {route:9s} {s['n_replicates']:6d} {s['outer_share']:6.3f} {lo:4.2f}-{hi:4.2f} "
                f"{score}  {'honest' if honest(s) else 'overconfident':13s} {users}")

@@ -616,6 +616,7 @@ def test_sbc_stored_alone_lists_every_shipped_file_by_its_default_route(capsys, 
     refused(["sbc", "--class", "HELI", "--stored"], inputs, out,
             ["--class and --ramps: both are needed", "`mdaug sbc --stored` alone lists every shipped estimator"])
     refused(["sbc", "--stored", "--json", str(out / "s.json")], inputs, out, ["(with --json"])
+    refused(["sbc", "--stored", "--specimens", "5"], inputs, out, ["(with --specimens 5)"])
 
 
 def test_sbc_stored_refuses_a_file_without_sbc_and_a_figure(tiny, tmp_path, refused):
