@@ -267,7 +267,7 @@ def _print_shipped() -> None:
     user's (the specimen model around the class reference). Simulates nothing."""
     from ..inference.amortized.estimator import AmortizedEstimator
     from ..inference.amortized.shipped import DATA, available
-    from ..inference.result.status import honest
+    from ..inference.result.status import verdict
 
     result("the shipped estimators (mdaug's inference/amortized/data/): each file's default route and its SBC")
     result("on fresh prior drones as stored; on drones like a user's, where stored, its log score (nats, lower")
@@ -295,7 +295,7 @@ def _print_shipped() -> None:
         users = (f"{specimens['drones']:5d} {row['log_score']:9.2f}  " + (" ".join(f"{v:.2f}" for v in lines) or "-")
                  if row else f"{'-':>5s} {'-':>9s}  -")
         result(f"{stem + '.zip':13s} {route:9s} {s['n_replicates']:6d} {s['outer_share']:6.3f} {lo:4.2f}-{hi:4.2f} "
-               f"{score}  {'honest' if honest(s) else 'overconfident':13s} {users}")
+               f"{score}  {verdict(s):13s} {users}")
     result("`mdaug sbc --class C --ramps K --stored` prints one file's every route, its route table and how its "
            "default was named")
 

@@ -264,15 +264,14 @@ def name_default_route(sbc: dict) -> None:
     (:func:`mdaug.inference.diagnostics.routes.default_route`); 'amortized' when none passes.
     ``default_by`` says why: the log score that chose among several passing routes, or that
     one route alone passed."""
-    from .diagnostics.routes import default_route
-    from .result.status import honest
+    from .diagnostics.routes import default_route, passing_routes
 
     table, spec = sbc["route_table"], sbc.get("specimens")
     best = default_route(table["rows"], spec["rows"] if spec else None)
     table["default"] = best or "amortized"
     if best is None:
         table["default_by"] = "no route passes the gate"
-    elif sum(honest(r) for r in table["rows"].values()) == 1:
+    elif len(passing_routes(table["rows"])) == 1:
         table["default_by"] = f"the only route that passes the gate on {table['drones']} prior drones"
     else:
         table["default_by"] = (f"log score on {spec['drones']} specimen drones" if spec else

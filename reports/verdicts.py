@@ -191,6 +191,13 @@ def main_test(results: dict) -> str | None:
     return "new" if "new" in names else names[0]
 
 
+def ceiling_test(results: dict, test: str) -> dict | None:
+    """The chosen ceiling model's record on ``test`` (None where there is none)."""
+    ceiling = results.get("ceiling") or {}
+    chosen = (ceiling.get("chosen") or {}).get("model")
+    return ((ceiling.get("models") or {}).get(chosen) or {}).get("tests", {}).get(test)
+
+
 def judge(results: dict) -> dict:
     """Every verdict of a study's results: {test, selection, sets: {set: {counts, majority,
     results: {strategy: verdicts}, ceiling: verdicts}}, best, ceiling, nuisances}."""
@@ -205,7 +212,7 @@ def judge(results: dict) -> dict:
         entry = {"counts": counts(results, t), "majority": always,
                  "results": {n: result(s["tests"][t], classes, always)
                              for n, s in results["strategies"].items() if t in s["tests"]}}
-        cm = ((ceiling.get("models") or {}).get((chosen or {}).get("model")) or {}).get("tests", {}).get(t)
+        cm = ceiling_test(results, t)
         entry["ceiling"] = result(cm, classes, always) if cm else None
         sets[t] = entry
     best = results.get("best_strategy") or {}

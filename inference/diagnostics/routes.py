@@ -156,13 +156,18 @@ def route_table(routes: dict, truths_q: np.ndarray, data, names: list[str], *, t
     return {"rows": rows, "default": default_route(rows)}
 
 
+def passing_routes(rows: dict) -> list[str]:
+    """The routes of a route table's SBC rows that pass the gate (:func:`honest`)."""
+    return [n for n, r in rows.items() if honest(r)]
+
+
 def default_route(rows: dict, specimen_rows: dict | None = None) -> str | None:
     """The route a file runs by default: among the routes that pass the gate on fresh
     prior drones (``rows``, the route table's SBC rows), the best (lowest) log score of the
     truth on drones like a user's where ``specimen_rows`` (the same routes on drones of
     the specimen model around the class reference) are given, else on the SBC drones;
     None when no route passes."""
-    passing = [n for n, r in rows.items() if honest(r)]
+    passing = passing_routes(rows)
     judge = rows if specimen_rows is None else specimen_rows
     passing = [n for n in passing if n in judge]
     return min(passing, key=lambda n: judge[n]["log_score"]) if passing else None

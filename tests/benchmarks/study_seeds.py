@@ -18,6 +18,7 @@ import sys
 import numpy as np
 
 from mdaug.reports.readme import load_results
+from mdaug.reports.verdicts import ceiling_test
 
 
 def _row(results: dict, test: str) -> dict:
@@ -26,9 +27,7 @@ def _row(results: dict, test: str) -> dict:
         t = s["tests"].get(test)
         if t is not None:
             out[name] = (float(t["balanced_accuracy"]), t.get("ci", {}).get("balanced_accuracy"))
-    ceiling = results.get("ceiling") or {}
-    chosen = (ceiling.get("chosen") or {}).get("model")
-    t = ((ceiling.get("models") or {}).get(chosen) or {}).get("tests", {}).get(test)
+    t = ceiling_test(results, test)
     if t is not None:  # the simulator's own data: what no augmentation can beat
         out["ceiling"] = (float(t["balanced_accuracy"]), t.get("ci", {}).get("balanced_accuracy"))
     return out
