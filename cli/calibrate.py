@@ -200,7 +200,7 @@ def run_calibrate(args) -> int:
     check_calibration_profiles(profiles, str(args.measured), cls,  # constant, repeated or off-centre: refused
                                rows if args.specimen is None else rows[data.specimens(cls) == args.specimen])
     check_calibrate_sizes(args, settings, len(profiles))
-    from .calibrate_amortized import (amortized_settings, calibration_method, report_amortized,
+    from .calibrate_amortized import (amortized_settings, calibration_method, predictive_draws, report_amortized,
                                       warn_several_drones)
 
     method = calibration_method(args, acquisition)
@@ -227,7 +227,8 @@ def run_calibrate(args) -> int:
             warnings.simplefilter("always")
             res = calibrate_amortized(profiles, cls.upper(), acquisition=acquisition, estimator=args.estimator,
                                       settings=amortized_settings(args, settings), random_state=args.seed,
-                                      route=args.route, check=args.check_route, source=str(args.measured))
+                                      route=args.route, check=args.check_route, source=str(args.measured),
+                                      **predictive_draws(args))
         return report_amortized(args, res, drones, caught)
     if len(set(drones.tolist())) > 1:
         warn("calibrate", f"{args.measured} holds {len(set(drones.tolist()))} drones of {cls} (field 'specimen'); "
@@ -282,6 +283,7 @@ def _interrupted(args) -> str:
 def add_calibrate(sub, parents, help):
     from ..inference.settings import FIT_ALGORITHMS, SAMPLERS, CalibrationSettings
     from ..inference.amortized.estimator import ROUTES
+    from ..inference.diagnostics.predictive import N_DRAWS as PREDICTIVE_DRAWS
     from .calibrate_amortized import ROUTE_BUDGET
     from ..radar.profiles import NORMALISATIONS
 
@@ -335,6 +337,11 @@ def add_calibrate(sub, parents, help):
                         "route_settings) and the defaults: route_ess (ESS share kept a tempering stage), "
                         "route_p_move, route_max_sweeps, route_moves (true/false), n_particles; repeat for more "
                         "(default: the file's, else the defaults)")
+    g.add_argument("--predictive", type=count(0, 5000, "0, or an integer from 20 to 5,000"), default=None,
+                   metavar="N", help="posterior draws measured for the posterior predictive check (each as many "
+                   "times as the data were; band means and spreads of the folded log-profile and the brightest "
+                   "engine's lines against the measurements' own; 0: no check) "
+                   f"(default: {PREDICTIVE_DRAWS})")
     g.add_argument("--check-route", action="store_true",
                    help="also run another route and keep its draws beside the posterior, as a check: smc "
                         "beside the amortized route, the amortized draws beside the smc route's (default: only "

@@ -21,6 +21,11 @@ def calibration_method(args, acquisition) -> str:
     phases are random) or 'likelihood' (the closed-form / fitted-phase likelihood; the
     default for the published single chirp at fixed phases).
     Refuses likelihood-only options with the amortized method, by name."""
+    from ..inference.diagnostics.predictive import MIN_DRAWS as PREDICTIVE_MIN
+
+    predictive = getattr(args, "predictive", None)
+    if predictive is not None and 0 < predictive < PREDICTIVE_MIN:
+        raise ValueError(f"--predictive: expected 0 (no check) or at least {PREDICTIVE_MIN} draws, got {predictive}")
     method = args.method
     if method == "auto":
         method = "amortized" if acquisition.phases == "uniform" else "likelihood"
@@ -40,11 +45,17 @@ def calibration_method(args, acquisition) -> str:
                              "calibration (the default for measured acquisitions) has no such setting")
     else:
         given = [o for o, v in (("--estimator", args.estimator), ("--route", args.route),
+                                ("--predictive", getattr(args, "predictive", None)),
                                 ("--route-knob", getattr(args, "route_knob", None)),
                                 ("--check-route", args.check_route or None)) if v is not None]
         if given:
             raise ValueError(f"{given[0]} applies to --method amortized")
     return method
+
+
+def predictive_draws(args) -> dict:
+    """``calibrate_amortized``'s ``predictive`` from ``--predictive`` (absent: its default)."""
+    return {} if getattr(args, "predictive", None) is None else {"predictive": int(args.predictive)}
 
 
 def amortized_settings(args, settings):

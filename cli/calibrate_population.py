@@ -93,10 +93,12 @@ def run_population(args, profiles, drones, settings, acquisition, method: str = 
             info(f"drone {drone} ({k + 1} of {len(ids)}): calibrating from {len(rows)} profile(s)")
             if method == "amortized":
                 from ..inference.amortized.calibrate import calibrate_amortized
+                from .calibrate_amortized import predictive_draws
 
                 res = calibrate_amortized(rows, cls, acquisition=acquisition, estimator=args.estimator,
                                           settings=settings, random_state=seed, route=args.route, fit=False,
-                                          source=f"{args.measured} (drone {drone})").record_specimens([drone])
+                                          source=f"{args.measured} (drone {drone})",
+                                          **predictive_draws(args)).record_specimens([drone])
             else:
                 res = calibrate(rows, cls, engines=args.engines, settings=settings, acquisition=acquisition,
                                 random_state=seed, backend_path=Path(f"{path}.chain.h5")).record_specimens([drone])

@@ -289,10 +289,8 @@ def _print_shipped() -> None:
             continue
         lo, hi = s["coverage90_range"]
         score = f"{s['log_score']:9.2f}" if "log_score" in s else f"{'-':>9s}"
-        specimens = sbc.get("specimens") or {}
-        row = (specimens.get("rows") or {}).get(route)
-        lines = [v for k, v in (row or {}).get("width_over_truth", {}).items() if " w[" in k][:4]
-        users = (f"{specimens['drones']:5d} {row['log_score']:9.2f}  " + (" ".join(f"{v:.2f}" for v in lines) or "-")
+        row = est.users_row(route)
+        users = (f"{row['drones']:5d} {row['log_score']:9.2f}  " + (" ".join(f"{v:.2f}" for v in row["lines"]) or "-")
                  if row else f"{'-':>5s} {'-':>9s}  -")
         result(f"{stem + '.zip':13s} {route:9s} {s['n_replicates']:6d} {s['outer_share']:6.3f} {lo:4.2f}-{hi:4.2f} "
                f"{score}  {verdict(s):13s} {users}")

@@ -13,7 +13,7 @@ import numpy as np
 
 from . import figures
 from .markup import Figures, Html, details, img, table, td
-from ..inference.result.status import OUT_OF_RANGE, calibration_status, run_facts
+from ..inference.result.status import MISFIT, NOT_CHECKED, OUT_OF_RANGE, calibration_status, run_facts
 from .numbers import column_decimals, fmt
 from .verdicts import FAR, nuisances
 
@@ -92,6 +92,15 @@ def _population(cls: str, c: dict, w: Html) -> str:
                     cells))
 
 
+def _predictive_text(st, d: dict, w: Html, key: str) -> str:
+    """The predictive check's word (a warning when a misfit) and its facts; key: the
+    diagnostics' place in results.json."""
+    if st.predictive == NOT_CHECKED:
+        return w.esc(NOT_CHECKED)
+    word = w.warn(w.esc(st.predictive)) if st.predictive == MISFIT else f"<b>{w.esc(st.predictive)}</b>"
+    return f"{word}: {w.esc(st.predictive_facts)} ({w.num(key + '.predictive.seconds', d['predictive'].get('seconds'), 1)} s)"
+
+
 def calibration_section(r: dict, figs: Figures, w: Html, report_dir: Path) -> str:
     out = ["<p class='note'>Each class is calibrated on its few measurements under the campaign's acquisition "
            "(phases marginalised). A vibration model is a sum of four lines per engine; which line is the roll, "
@@ -114,7 +123,9 @@ def calibration_section(r: dict, figs: Figures, w: Html, report_dir: Path) -> st
         out.append(f"<ul><li><b>Convergence</b>: {w.esc(st.convergence)}{': ' + detail if detail else ''}.</li>"
                    f"<li><b>Route</b>: {chain}; {w.num(k + '.seconds', d.get('seconds'), 0)} s on "
                    f"{fmt(c.get('n_profiles'))} measurements.</li>"
-                   f"<li><b>SBC</b>: {_sbc_text(st, w)}</li></ul>")
+                   f"<li><b>SBC</b>: {_sbc_text(st, w)}</li>"
+                   + (f"<li><b>Drones like a user's</b>: {w.esc(st.users_facts)}.</li>" if st.users else "")
+                   + f"<li><b>Posterior predictive check</b>: {_predictive_text(st, d, w, k)}</li></ul>")
         if st.out_of_range:
             out.append(f"<p class='warn'>{w.esc(OUT_OF_RANGE)}: "
                        f"{w.esc(st.out_of_range_why or 'measurements unlike the training set')}</p>")

@@ -193,6 +193,53 @@ def test_the_check_route_keeps_its_own_words():
     assert calibration_status(d).check == ""
 
 
+def test_a_misfit_is_one_word_in_every_place(tmp_path):
+    """The check's word in the status, the terminal report, results.json, the report page
+    and the README line; a misfit is not trusted; no record: 'not checked'."""
+    from mdaug.inference.result.status import FITS, MISFIT, NOT_CHECKED
+    from mdaug.reports.markup import Html
+    from mdaug.reports.page_calibration import calibration_section
+    from mdaug.reports.readme import _calibration_text
+
+    d = _amortized_diag("amortized", True)
+    assert calibration_status(d).predictive == NOT_CHECKED and "predictive" not in calibration_status(d).headline
+    names = ["band 1-2 bins: mean", "band 81-199 bins: mean"]
+    d["estimator"]["users"] = {"drones": 50, "log_score": -1.83, "lines": [0.99, 0.71, 0.58, 0.25]}
+    d["predictive"] = {"names": names, "observed": [-1.0, -2.0], "mean": [-1.0, -3.0], "sd": [0.1, 0.1],
+                       "z": [0.2, 10.0], "quantile": [0.5, 1.0], "z_limit": 2.8, "n_draws": 200,
+                       "n_measurements": 3, "word": MISFIT, "flagged": names[1:],
+                       "why": "band 81-199 bins: mean at z = +10.0", "seconds": 1.5}
+    res = _result(d)
+    st = calibration_status(res)
+    headline = "amortized route: exact draws; SBC: honest; predictive check: misfit"
+    assert st.predictive == MISFIT and st.headline == headline and not st.trusted
+    assert ("2 statistics of the measurements against 200 posterior draws measured 3 times each, largest |z| 10.0 "
+            "(limit 2.8); beyond it: band 81-199 bins: mean at z = +10.0") in st.predictive_facts
+    text = res.report()
+    assert f"status: {headline}" in text and "  WARNING: posterior predictive check: misfit: 2 statistics" in text
+    rec = _study_record(res)
+    assert rec["status"]["predictive"] == MISFIT and rec["status"]["predictive_words"] == st.predictive_words
+    assert calibration_status(rec).headline == headline
+
+    class NoFigures:
+        def embed(self, *a, **k):
+            return ""
+
+    page = calibration_section({"calibration": {"QUAD": rec}}, NoFigures(), Html(), tmp_path)
+    assert f"QUAD: <span class='warn'>{headline}</span>" in page
+    assert "<b>Posterior predictive check</b>: <span class='warn'>misfit</span>: 2 statistics" in page
+    users = ("on 50 simulated drones like a user's (the specimen model), the file's route table: log score -1.83 "
+             "nats; the brightest engine's lines 1-4 at 0.99 / 0.71 / 0.58 / 0.25 x the truth (median 90% width)")
+    assert f"<li><b>Drones like a user's</b>: {Html.esc(users)}.</li>" in page and f"  {users}" in text
+    assert rec["status"]["users_facts"] == users
+    assert f"QUAD {headline}" in _calibration_text("QUAD", rec)
+    d["predictive"].update(word=FITS, z=[0.2, 1.0], flagged=[], why="")
+    st = calibration_status(d)
+    assert st.predictive == FITS and st.trusted and st.headline == "amortized route: exact draws; SBC: honest"
+    assert st.lines()[-1] == ("  posterior predictive check: fits: 2 statistics of the measurements against 200 "
+                              "posterior draws measured 3 times each, largest |z| 1.0 (limit 2.8)")
+
+
 def test_corner_shows_the_brightest_engine_with_truths_and_a_legend_for_the_route(tmp_path, monkeypatch):
     res = _result(_amortized_diag("amortized", True), cls="QUAD")
     ref = load_reference("QUAD").to_array()
@@ -214,3 +261,14 @@ def test_corner_shows_the_brightest_engine_with_truths_and_a_legend_for_the_rout
     assert kept["axes"] == 4 * 64 and not any("true" in t for t in kept["legend"])
     with pytest.raises(ValueError, match="engines"):
         res.plot_corner(tmp_path / "x.png", engines="faint")
+
+
+def test_the_route_used_brings_its_row_on_drones_like_a_users():
+    """The file's stored specimen row of a route (log score, lines 1-4), as `sbc --stored`
+    prints it; None where the file stores none."""
+    from mdaug.inference.amortized.shipped import find
+
+    row = find("HELI", Acquisition.measured(32), RadarConfig()).users_row("smc")
+    assert row["drones"] == 50 and len(row["lines"]) == 4 and row["lines"] == sorted(row["lines"], reverse=True)
+    assert 0.1 < row["lines"][3] < row["lines"][0] < 3.0 and np.isfinite(row["log_score"])
+    assert find("QUAD", Acquisition.measured(1), RadarConfig()).users_row("amortized") is None

@@ -43,6 +43,7 @@ from ...radar import RadarConfig
 from ...radar.seeds import child_seed, seed_sequence
 from ..likelihood.base import prepare_measured
 from ..space.priors import SHARED
+from ..diagnostics.predictive import N_DRAWS, predictive_check
 from ..result.posterior import FORMAT, IDENTIFIED_RATIO, CalibrationResult, import_arviz
 from .estimator import ROUTES
 from .shipped import find
@@ -54,7 +55,7 @@ DISAGREE_LIMIT = 0.25  # share of quantities whose smc median leaves the amortiz
 def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None = None, estimator=None,
                         settings=None, random_state=None, n_draws: int = 4000, route: str | None = None,
                         check: bool = False, fit: bool = True, radar: RadarConfig = RadarConfig(),
-                        source: str = "measured profiles"):
+                        source: str = "measured profiles", predictive: int = N_DRAWS):
     """Calibrate one drone (module doc). estimator: an :class:`.estimator.AmortizedEstimator`,
     a path, or None (the shipped one for the class and acquisition); settings: the
     :class:`~mdaug.inference.settings.CalibrationSettings` of the smc route (its
@@ -62,7 +63,9 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
     one of :data:`.estimator.ROUTES` or None (the estimator's default route); check:
     also run another route, as a check; fit: where the file has a summary likelihood and
     the route is amortized, run the smc route for the best fit (module doc; False: the
-    amortized median, as for a population's drones, whose best fits nothing uses)."""
+    amortized median, as for a population's drones, whose best fits nothing uses);
+    predictive: posterior draws measured for the posterior predictive check
+    (:mod:`mdaug.inference.diagnostics.predictive`, ``diagnostics['predictive']``; 0: none)."""
     from ..settings import CalibrationSettings
     from .estimator import AmortizedEstimator, EstimatorError
 
@@ -89,7 +92,7 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
     x_amortized, _ = lf.vectors(lf.from_unbounded(u))
     diag = {"sampler": "amortized" if route == "amortized" else "smc", "route": route,
             "amortized_seconds": t_amortized, "amortized_inside_prior": float(inside),
-            "estimator": _estimator_info(est), "check": bool(check),
+            "estimator": _estimator_info(est, route), "check": bool(check),
             "best_fit_from": "smc" if (sampled == "smc" and est.summary is not None) else route}
     x_sampled = None
     if sampled:
@@ -128,6 +131,8 @@ def calibrate_amortized(profiles, reference, *, acquisition: Acquisition | None 
         diag.update(converged=diag["smc"]["converged"], reason=diag["smc"]["reason"])
     if diag["out_of_range"]:
         warnings.warn(f"{source}: {diag['out_of_range_why']}", stacklevel=2)
+    if predictive:
+        diag["predictive"] = _predictive(lf, chosen, data, est, predictive, child_seed(ss, "predictive"))
     other = None if not check else (x_sampled if route == "amortized" else x_amortized)
     best, diag["best_fit_median"] = label_free_median(lf, x_sampled if diag["best_fit_from"] == "smc" else chosen)
     return _result(ref, est, data, shifts, chosen, other, diag, n_draws, best)
@@ -147,6 +152,16 @@ def label_free_median(lf, x: np.ndarray) -> tuple[np.ndarray, str]:
     if ok[0]:
         return v[0], "label-free"
     return np.median(x, axis=0), "component-wise"
+
+
+def _predictive(lf, x: np.ndarray, data: np.ndarray, est, n_draws: int, seed: int) -> dict:
+    """The posterior predictive check of draws x (n, 13E) against the calibrated data (M, L),
+    at the brightest engine's label-free median lines, as plain data with its time."""
+    t0 = time.perf_counter()
+    lines = np.median(lf.quantities(x)[:, :4], axis=0)  # 'line 1-4 w[0]': the brightest engine's, sorted
+    out = predictive_check(x, data, est.spec.acquisition, est.spec.radar, lines=lines, n_draws=n_draws,
+                           random_state=seed).to_dict()
+    return {**out, "seconds": time.perf_counter() - t0}
 
 
 def _widths(lf, x: np.ndarray, crb: dict) -> dict:
@@ -172,10 +187,12 @@ def _crb(post, u) -> dict:
     return dict(zip(post.label_free.names, map(float, sd)))
 
 
-def _estimator_info(est) -> dict:
+def _estimator_info(est, route: str) -> dict:
+    """The file's facts a result keeps: its class, K, simulations, temperature, every
+    route's stored SBC, and the route used's row on drones like a user's (``users``)."""
     m = est.meta
     return {"class": est.class_name, "ramps": est.spec.acquisition.ramps, "simulations": m.get("n_simulations"),
-            "simulator": m["spec"].get("simulator"), "temperature": est.temperature,
+            "simulator": m["spec"].get("simulator"), "temperature": est.temperature, "users": est.users_row(route),
             "sbc": {r: {**{k: m["sbc"][r].get(k) for k in ("outer_share", "coverage90_range", "n_replicates",
                                                              "pooled_p")}, "n_quantities": est.label_free.dim}
                     for r in m.get("sbc", {}) if isinstance(m["sbc"][r], dict) and "outer_share" in m["sbc"][r]}}

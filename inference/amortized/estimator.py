@@ -91,6 +91,19 @@ class AmortizedEstimator:
         st = self.meta.get("stacking")
         return None if not st else float(st["weight"])
 
+    def users_row(self, route: str) -> dict | None:
+        """What the file's route table stores of ``route`` on drones like a user's (the
+        specimen model around the class reference, meta field ``sbc.specimens``):
+        ``drones``, ``log_score`` (nats, lower is better) and ``lines``, the brightest
+        engine's lines 1-4 median 90% width / truth (empty where not stored); None where
+        the file stores no such row."""
+        specimens = (self.meta.get("sbc") or {}).get("specimens") or {}
+        row = (specimens.get("rows") or {}).get(route)
+        if not row or "log_score" not in row:
+            return None
+        lines = [float(v) for k, v in (row.get("width_over_truth") or {}).items() if " w[0]" in k][:4]
+        return {"drones": int(specimens["drones"]), "log_score": float(row["log_score"]), "lines": lines}
+
     def check_route(self, route: str, source: str = "the estimator") -> None:
         """ValueError naming ``source`` unless this file has ``route`` (one of :data:`ROUTES`;
         'stacked' only with a stacking weight)."""

@@ -86,15 +86,23 @@ class SimulationSpec:
 def simulate(spec: SimulationSpec, n: int, seed, scene=None) -> tuple[np.ndarray, np.ndarray]:
     """n drones (:meth:`SimulationSpec.sample_vectors`) and their measurements: (vectors
     (n, 13E), profiles (n, M, L) float32 peak-normalised). Depends only on ``seed``."""
-    from ...generator.augment import Renderer
-
     truth_ss, data_ss = seed_sequence(seed).spawn(2)
     x = spec.sample_vectors(n, seeded_rng(truth_ss))
-    m = spec.n_measurements
-    renderer = Renderer(spec.acquisition, normalisation="none", radar=spec.radar, through_chain=True, scene=scene)
-    raw = renderer.render(np.repeat(x, m, axis=0), seeded_rng(data_ss))
-    y, _ = prepare_measured(raw, spec.radar, "peak", what="simulated profiles")
-    return x, y.astype(np.float32).reshape(n, m, -1)
+    return x, measure(x, spec.n_measurements, spec.acquisition, spec.radar, seeded_rng(data_ss), scene=scene)
+
+
+def measure(x: np.ndarray, n_measurements: int, acquisition: Acquisition, radar: RadarConfig, rng,
+            scene=None) -> np.ndarray:
+    """Profiles (n, M, L) float32 of ``n_measurements`` acquisitions of each drone x (n, 13E):
+    the scene simulator and the radar chain, then :func:`prepare_measured` (peak
+    normalisation, re-centring), as a measured file goes through. rng: a Generator."""
+    from ...generator.augment import Renderer
+
+    x = np.atleast_2d(np.asarray(x, float))
+    renderer = Renderer(acquisition, normalisation="none", radar=radar, through_chain=True, scene=scene)
+    raw = renderer.render(np.repeat(x, n_measurements, axis=0), rng)
+    y, _ = prepare_measured(raw, radar, "peak", what="simulated profiles")
+    return y.astype(np.float32).reshape(len(x), n_measurements, -1)
 
 
 def _shard_job(args) -> str:

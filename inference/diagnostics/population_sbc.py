@@ -103,7 +103,7 @@ def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n
         try:
             results = [calibrate_amortized(camp.profiles[camp.specimen == d], ref, acquisition=camp.acquisition,
                                            random_state=seed_sequence(run_ss, d), route="amortized", n_draws=2000,
-                                           source=f"drone {d}") for d in range(n_drones)]
+                                           source=f"drone {d}", predictive=0) for d in range(n_drones)]
         except EstimatorError as exc:  # the calibration refuses this drone, as it refuses a user's: counted
             return {"i": i, "refused": str(exc), "seconds": time.perf_counter() - t0}
     else:

@@ -21,7 +21,12 @@ The facts and their words:
   ``no SBC stored`` (the closed-form route stores none). The rank histograms' pooled
   chi-square p is said beside it in words, never as a second verdict;
 * **out of range**: the measurements unlike the estimator's training set
-  (``diagnostics['out_of_range']``, why in ``['out_of_range_why']``).
+  (``diagnostics['out_of_range']``, why in ``['out_of_range_why']``);
+* **the posterior predictive check** (:mod:`mdaug.inference.diagnostics.predictive`,
+  ``diagnostics['predictive']``): ``fits`` (the measurements are like those the
+  posterior's drones make), ``misfit`` (some statistic of them lies beyond the check's
+  limit: the posterior does not explain them, whatever its SBC says) or ``not checked``
+  (the closed-form route, files of earlier releases, ``--predictive 0``).
 """
 from __future__ import annotations
 
@@ -107,6 +112,8 @@ EXACT, CONVERGED, NOT_CONVERGED = "exact draws", "converged", "NOT converged"
 NO_SBC = "no SBC stored"
 """The honesty word where no SBC is stored (else the gate's own word, :func:`verdict`)."""
 OUT_OF_RANGE = "out of range"
+FITS, MISFIT, NOT_CHECKED = "fits", "misfit", "not checked"
+"""The posterior predictive check's words (module doc)."""
 
 _LIKELIHOODS = {"summary": "the estimator's summary likelihood", "ratio": "the estimator's learned likelihood ratio"}
 _SAMPLERS = {"emcee": "emcee", "smc": "tempered SMC", "laplace": "a Laplace approximation"}
@@ -146,6 +153,14 @@ class CalibrationStatus:
     """Its sampler's reason."""
     check_role: str = ""
     """Why it ran: 'run for the best fit', 'run as a check' or both (:func:`smc_role`)."""
+    users: dict | None = None
+    """The file's route table row of the route used on drones like a user's (``drones``,
+    ``log_score``, ``lines``: :meth:`mdaug.inference.amortized.estimator.AmortizedEstimator.users_row`),
+    or None where it stores none."""
+    predictive: str = NOT_CHECKED
+    """The posterior predictive check's word: 'fits', 'misfit' or 'not checked'."""
+    predictive_facts: str = ""
+    """What it compared and found, in one clause ('' when not checked)."""
 
     @property
     def check(self) -> str:
@@ -156,15 +171,17 @@ class CalibrationStatus:
 
     @property
     def headline(self) -> str:
-        """One line: route, convergence, honesty and, when so, out of range:
-        e.g. ``smc route: NOT converged; SBC: overconfident; out of range``."""
+        """One line: route, convergence, honesty and, when so, out of range and a misfit:
+        e.g. ``smc route: NOT converged; SBC: overconfident; out of range; predictive check: misfit``."""
         text = f"{self.route} route: {self.convergence}; SBC: {self.honesty}"
-        return text + (f"; {OUT_OF_RANGE}" if self.out_of_range else "")
+        text += f"; {OUT_OF_RANGE}" if self.out_of_range else ""
+        return text + ("; predictive check: misfit" if self.predictive == MISFIT else "")
 
     @property
     def trusted(self) -> bool:
-        """Usable as it stands: converged (or exact), not overconfident, in range."""
-        return self.converged and self.passed is not False and not self.out_of_range
+        """Usable as it stands: converged (or exact), not overconfident, in range, and no
+        misfit by the predictive check."""
+        return self.converged and self.passed is not False and not self.out_of_range and self.predictive != MISFIT
 
     @property
     def sbc_facts(self) -> str:
@@ -181,6 +198,17 @@ class CalibrationStatus:
         return text + (f"; {self.rank_note}" if self.rank_note else "")
 
     @property
+    def users_facts(self) -> str:
+        """The route's stored row on drones like a user's in one clause ('' where none)."""
+        u = self.users
+        if not u:
+            return ""
+        lines = (f"; the brightest engine's lines 1-4 at {' / '.join(f'{v:.2f}' for v in u['lines'])} x the truth "
+                 "(median 90% width)") if u.get("lines") else ""
+        return (f"on {u['drones']} simulated drones like a user's (the specimen model), the file's route table: "
+                f"log score {u['log_score']:.2f} nats{lines}")
+
+    @property
     def sbc_words(self) -> str:
         """The honesty word and the facts behind it in one sentence."""
         return f"{self.honesty}: {self.sbc_facts}" if self.sbc else f"{NO_SBC} for the {self.route} route"
@@ -192,17 +220,27 @@ class CalibrationStatus:
             out.append(("  " if self.converged else "  WARNING: ") + self.convergence
                        + (f": {self.convergence_detail}" if self.convergence_detail else ""))
         out.append(f"  SBC: {self.sbc_words}")
+        if self.users:
+            out.append(f"  {self.users_facts}")
         if self.check:  # unconverged: a best fit from it is its particles' median at a temperature < 1
             out.append(("  WARNING: " if self.check_convergence == NOT_CONVERGED else "  ") + self.check
                        + (f" ({self.check_detail})" if self.check_detail else ""))
         if self.out_of_range:
             out.append(f"  WARNING: {OUT_OF_RANGE}: {self.out_of_range_why}")
+        if self.predictive != NOT_CHECKED:
+            out.append(("  WARNING: " if self.predictive == MISFIT else "  ") + self.predictive_words)
         return out
+
+    @property
+    def predictive_words(self) -> str:
+        """The predictive check's word and facts in one sentence."""
+        return f"posterior predictive check: {self.predictive}" + (f": {self.predictive_facts}"
+                                                                   if self.predictive_facts else "")
 
     def to_dict(self) -> dict:
         """Plain data for ``results.json`` (the headline and SBC sentence included)."""
         return {**asdict(self), "headline": self.headline, "sbc_words": self.sbc_words, "sbc_facts": self.sbc_facts,
-                "check": self.check,
+                "check": self.check, "predictive_words": self.predictive_words, "users_facts": self.users_facts,
                 "trusted": self.trusted}
 
 
@@ -307,7 +345,21 @@ def calibration_status(source) -> CalibrationStatus:
                              out_of_range=bool(d.get("out_of_range", False)),
                              out_of_range_why=str(d.get("out_of_range_why") or ""), check_route=check[0],
                              check_convergence=check[1], check_detail=check[2],
-                             check_role=smc_role(d) if check[0] else "")
+                             check_role=smc_role(d) if check[0] else "",
+                             users=(d.get("estimator") or {}).get("users") if amortized else None,
+                             **_predictive(d.get("predictive")))
+
+
+def _predictive(p) -> dict:
+    """The predictive check's word and facts from its record (None: not checked)."""
+    if not isinstance(p, dict) or p.get("word") not in (FITS, MISFIT):
+        return {"predictive": NOT_CHECKED, "predictive_facts": ""}
+    n, top = len(p["names"]), max(abs(z) for z in p["z"])
+    facts = (f"{n} statistics of the measurements against {p['n_draws']} posterior draws measured "
+             f"{p['n_measurements']} times each, largest |z| {top:.1f} (limit {p['z_limit']:.1f})")
+    if p["word"] == MISFIT:
+        facts += f"; beyond it: {p['why']}: the posterior's drones do not make profiles like these"
+    return {"predictive": p["word"], "predictive_facts": facts}
 
 
 def _strip(reason: str) -> str:
