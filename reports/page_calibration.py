@@ -101,6 +101,22 @@ def _predictive_text(st, d: dict, w: Html, key: str) -> str:
     return f"{word}: {w.esc(st.predictive_facts)} ({w.num(key + '.predictive.seconds', d['predictive'].get('seconds'), 1)} s)"
 
 
+def _predictive_table(d: dict) -> str:
+    """The predictive check statistic by statistic ('' where it did not run), folded with the lines."""
+    p = d.get("predictive")
+    if not isinstance(p, dict) or "names" not in p:
+        return ""
+    rows = [[td(html.escape(n), False), td(fmt(o, 3)), td(f"{fmt(m, 3)} &plusmn; {fmt(sd, 3)}"), td(fmt(z, 1)),
+             td(fmt(q, 2))] for n, o, m, sd, z, q in zip(p["names"], p["observed"], p["mean"], p["sd"], p["z"],
+                                                          p["quantile"])]
+    marks = ["warn" if abs(z) > p["z_limit"] else "" for z in p["z"]]
+    return (f"<p>The posterior predictive check, statistic by statistic (log10 of the peak-normalised profile, "
+            f"folded; spreads: the cube root of the variance over the measurements; beyond |z| = "
+            f"{fmt(p['z_limit'], 1)}: a misfit):</p>"
+            + table(["statistic", "measured", "predictive mean &plusmn; sd", "z", "predictive quantile"], rows,
+                    marks))
+
+
 def calibration_section(r: dict, figs: Figures, w: Html, report_dir: Path) -> str:
     out = ["<p class='note'>Each class is calibrated on its few measurements under the campaign's acquisition "
            "(phases marginalised). A vibration model is a sum of four lines per engine; which line is the roll, "
@@ -137,7 +153,7 @@ def calibration_section(r: dict, figs: Figures, w: Html, report_dir: Path) -> st
         out.append(_acquisition_compare(cls, c, w))
         out.append(_population(cls, c, w))
         unid = [p for p, ok in (d.get("identified") or {}).items() if not ok]
-        body = _lines_table(c)
+        body = _lines_table(c) + _predictive_table(d)
         if unid:
             body += (f"<p class='note'>Parameters that stay near their prior (posterior sd over "
                      f"{fmt(d.get('identified_ratio', 0.5), 1)} x prior sd): {w.esc(', '.join(unid))}.</p>")
@@ -152,7 +168,7 @@ def calibration_section(r: dict, figs: Figures, w: Html, report_dir: Path) -> st
         if trace and Path(trace).is_file():
             body += ("<p>The walkers' paths (burn-in shaded):</p>"
                      + img(trace, f"{cls} trace plot of the walkers' paths"))
-        out.append(details(f"{cls}: the lines in numbers, the corner and trace plots", body))
+        out.append(details(f"{cls}: the lines in numbers, the predictive check, the corner and trace plots", body))
     return "\n".join(out)
 
 

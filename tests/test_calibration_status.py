@@ -228,6 +228,13 @@ def test_a_misfit_is_one_word_in_every_place(tmp_path):
     page = calibration_section({"calibration": {"QUAD": rec}}, NoFigures(), Html(), tmp_path)
     assert f"QUAD: <span class='warn'>{headline}</span>" in page
     assert "<b>Posterior predictive check</b>: <span class='warn'>misfit</span>: 2 statistics" in page
+    # statistic by statistic: the one beyond the limit marked, in the terminal and on the page
+    row = [ln for ln in text.splitlines() if ln.startswith("band 81-199 bins: mean")][0]
+    assert row.split()[4:] == ["-2.000", "-3.000", "0.100", "10.000", "1.000", "beyond", "the", "limit"]
+    assert "band 1-2 bins: mean" in text and "beyond" not in [ln for ln in text.splitlines()
+                                                              if ln.startswith("band 1-2 bins: mean")][0]
+    assert ('<tr class="warn"><td>band 81-199 bins: mean</td><td class=\'n\'>-2.000</td>'
+            "<td class='n'>-3.000 &plusmn; 0.100</td><td class='n'>10.0</td>") in page
     users = ("on 50 simulated drones like a user's (the specimen model), the file's route table: log score -1.83 "
              "nats; the brightest engine's lines 1-4 at 0.99 / 0.71 / 0.58 / 0.25 x the truth (median 90% width)")
     assert f"<li><b>Drones like a user's</b>: {Html.esc(users)}.</li>" in page and f"  {users}" in text

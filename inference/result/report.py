@@ -112,6 +112,8 @@ def amortized_report(res, identified_ratio: float) -> str:
                     "median fits the prior)"
                     if d.get("best_fit_median") == "component-wise" else ""))
     lines += calibration_status(res).lines()
+    if isinstance(d.get("predictive"), dict) and "names" in d["predictive"]:
+        lines.append(predictive_table(d["predictive"]))
     if d.get("widths"):
         lines.append("label-free quantities (the lines sorted by frequency; rad/s and m): median, 90% interval, "
                      "its width / median, and the Cramer-Rao bound's 90% width / median for these measurements")
@@ -128,3 +130,19 @@ def amortized_report(res, identified_ratio: float) -> str:
     lines.append("units: m (amplitudes A), rad/s (angular frequencies w; f = w / 2 pi); sd_ratio: posterior sd / "
                  f"prior sd (identified at <= {identified_ratio})")
     return "\n".join(lines)
+
+
+def predictive_table(p: dict) -> str:
+    """The posterior predictive check's statistics (its record ``p``, :mod:`mdaug.inference.diagnostics.predictive`)
+    as a table: the data's value, the predictive mean and sd, z and the data's predictive quantile,
+    the statistics beyond the limit marked."""
+    import pandas as pd
+
+    rows = {n: {"data": o, "predictive mean": m, "sd": sd, "z": z, "quantile": q,
+                "": "beyond the limit" if abs(z) > p["z_limit"] else ""}
+            for n, o, m, sd, z, q in zip(p["names"], p["observed"], p["mean"], p["sd"], p["z"], p["quantile"])}
+    with pd.option_context("display.width", 140, "display.max_rows", 500):
+        table = pd.DataFrame(rows).T.to_string(float_format=lambda v: f"{v:.3f}")
+    return ("posterior predictive check, statistic by statistic (log10 of the peak-normalised profile, folded; "
+            "spreads: cube root of the variance over the measurements)\n" + table)
+
