@@ -87,6 +87,13 @@ def _corner_figure(res, path, monkeypatch, **kw):
     return kept
 
 
+class _NoFigures:
+    """The report's figure holder, drawing nothing (the calibration page's text alone)."""
+
+    def embed(self, *a, **k):
+        return ""
+
+
 def _study_record(res) -> dict:
     """The calibration's record as the study writes it into results.json."""
     from mdaug.reports.jobs import calibration_record
@@ -127,11 +134,7 @@ def test_terminal_corner_title_and_results_json_say_the_same_words(route, conver
     from mdaug.reports.page_calibration import calibration_section
     from mdaug.reports.readme import _calibration_text
 
-    class NoFigures:
-        def embed(self, *a, **k):
-            return ""
-
-    page = calibration_section({"calibration": {"QUAD": rec}}, NoFigures(), Html(), tmp_path)
+    page = calibration_section({"calibration": {"QUAD": rec}}, _NoFigures(), Html(), tmp_path)
     assert f"QUAD: <span class='{'ok' if st.trusted else 'warn'}'>{headline}</span>" in page
     assert f"QUAD {headline}" in _calibration_text("QUAD", rec)
     if oor:
@@ -221,11 +224,7 @@ def test_a_misfit_is_one_word_in_every_place(tmp_path):
     assert rec["status"]["predictive"] == MISFIT and rec["status"]["predictive_words"] == st.predictive_words
     assert calibration_status(rec).headline == headline
 
-    class NoFigures:
-        def embed(self, *a, **k):
-            return ""
-
-    page = calibration_section({"calibration": {"QUAD": rec}}, NoFigures(), Html(), tmp_path)
+    page = calibration_section({"calibration": {"QUAD": rec}}, _NoFigures(), Html(), tmp_path)
     assert f"QUAD: <span class='warn'>{headline}</span>" in page
     assert "<b>Posterior predictive check</b>: <span class='warn'>misfit</span>: 2 statistics" in page
     # statistic by statistic: the one beyond the limit marked, in the terminal and on the page
