@@ -269,3 +269,36 @@ def posterior_lines_figure(cal: dict, cls: str):
         fig.tight_layout(rect=(0, 0.45 / fig.get_figheight(), 1, 1))
     return fig
 
+
+
+def predictive_figure(cal: dict, cls: str):
+    """The posterior predictive check of a class (:mod:`mdaug.inference.diagnostics.predictive`):
+    each statistic's z (the measurements against the posterior's replicates, in predictive
+    sd), the limit beyond which it is a misfit dashed, bars beyond it hatched; None where the
+    check did not run."""
+    p = (cal.get("diagnostics") or {}).get("predictive")
+    if not isinstance(p, dict) or "names" not in p:
+        return None
+    plt = pyplot()
+    z, lim = np.asarray(p["z"], float), float(p["z_limit"])
+    n = len(z)
+    with figure_style():
+        fig, ax = plt.subplots(figsize=(PAGE_WIDTH_IN, 0.28 * n + 1.3))
+        y = np.arange(n)[::-1]
+        beyond = np.abs(z) > lim
+        ax.barh(y, z, color=colour(cls), height=0.7)
+        if beyond.any():
+            ax.barh(y[beyond], z[beyond], color="none", edgecolor="k", hatch="//", height=0.7,
+                    label="beyond the limit: a misfit")
+        for s in (-lim, lim):
+            ax.axvline(s, **REFERENCE_STYLE, label=f"limit |z| = {lim:.1f} (family-wise 0.01)" if s > 0 else None)
+        ax.axvline(0, color="0.6", lw=0.8)
+        ax.set_yticks(y, p["names"])
+        span = max(1.25 * lim, 1.1 * float(np.max(np.abs(z))))
+        ax.set_xlim(-span, span)
+        ax.set_xlabel("z: (measured - predictive mean) / predictive sd")
+        ax.set_title(f"{cls}: the measurements against {p['n_draws']} posterior draws, each measured "
+                     f"{p['n_measurements']} times", loc="left")
+        ax.legend(loc="lower right")
+        fig.tight_layout()
+    return fig

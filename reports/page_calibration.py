@@ -150,6 +150,8 @@ def calibration_section(r: dict, figs: Figures, w: Html, report_dir: Path) -> st
                                   f"{cls} posterior, label-free: each engine's four vibration lines, frequency in Hz "
                                   f"against amplitude in mm, medians with 5-95% intervals, and the class reference's "
                                   "line frequencies"))
+        out.append(figs.embed(f"predictive_{cls}", figures.predictive_figure(c, cls),
+                              f"{cls} posterior predictive check: each statistic's z against the limit"))
         out.append(_acquisition_compare(cls, c, w))
         out.append(_population(cls, c, w))
         unid = [p for p, ok in (d.get("identified") or {}).items() if not ok]

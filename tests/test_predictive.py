@@ -118,3 +118,20 @@ def test_the_spread_statistic_keeps_the_limits_level():
     log_z = np.log(spread)
     log_z = (log_z - log_z.mean()) / log_z.std()
     assert np.mean(np.abs(log_z) > z_limit(14)) > 4 * level  # what the log would have done
+
+
+def test_the_reports_figure_marks_the_statistics_beyond_the_limit():
+    from mdaug.reports.figures import predictive_figure
+
+    assert predictive_figure({"diagnostics": {}}, "HELI") is None
+    names = ["band 1-2 bins: mean", "band 81-199 bins: mean", "line 1 (4 bins)"]
+    p = {"names": names, "z": [0.5, -6.0, 4.0], "z_limit": 3.0, "n_draws": 200, "n_measurements": 5}
+    fig = predictive_figure({"diagnostics": {"predictive": p}}, "HELI")
+    ax = fig.axes[0]
+    assert [t.get_text() for t in ax.get_yticklabels()] == names
+    hatched = [b for b in ax.patches if b.get_hatch()]
+    assert sorted(round(b.get_width(), 6) for b in hatched) == [-6.0, 4.0]  # the two beyond |z| = 3
+    assert sorted(ln.get_xdata()[0] for ln in ax.lines if ln.get_linestyle() == "--") == [-3.0, 3.0]
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
