@@ -270,12 +270,13 @@ def posterior_lines_figure(cal: dict, cls: str):
     return fig
 
 
-
 def predictive_figure(cal: dict, cls: str):
     """The posterior predictive check of a class (:mod:`mdaug.inference.diagnostics.predictive`):
     each statistic's z (the measurements against the posterior's replicates, in predictive
     sd), the limit beyond which it is a misfit dashed, bars beyond it hatched; None where the
     check did not run."""
+    from ..inference.diagnostics.predictive import ALPHA
+
     p = (cal.get("diagnostics") or {}).get("predictive")
     if not isinstance(p, dict) or "names" not in p:
         return None
@@ -291,7 +292,7 @@ def predictive_figure(cal: dict, cls: str):
             ax.barh(y[beyond], z[beyond], color="none", edgecolor="k", hatch="//", height=0.7,
                     label="beyond the limit: a misfit")
         for s in (-lim, lim):
-            ax.axvline(s, **REFERENCE_STYLE, label=f"limit |z| = {lim:.1f} (family-wise 0.01)" if s > 0 else None)
+            ax.axvline(s, **REFERENCE_STYLE, label=f"limit |z| = {lim:.1f} (family-wise {ALPHA:g})" if s > 0 else None)
         ax.axvline(0, color="0.6", lw=0.8)
         ax.set_yticks(y, p["names"])
         span = max(1.25 * lim, 1.1 * float(np.max(np.abs(z))))
