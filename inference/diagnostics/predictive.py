@@ -44,7 +44,8 @@ from ..result.status import FITS, MISFIT
 BANDS = ((1, 2), (3, 10), (11, 30), (31, 80), (81, 199))
 """Bands of offsets from the peak (bins, inclusive) of the band statistics."""
 ALPHA = 0.01
-"""Family-wise level of the check: the chance a correct model's data are flagged, at most."""
+"""Family-wise level of the check: the chance a correct model's data are flagged, at most where the
+statistics are Gaussian (docs/calibration.md measures it on simulated drones)."""
 N_DRAWS = 200
 """Posterior draws measured for the check by default."""
 MIN_DRAWS = 20
