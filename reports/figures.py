@@ -276,9 +276,10 @@ def predictive_figure(cal: dict, cls: str):
     sd), the limit beyond which it is a misfit dashed, bars beyond it hatched; None where the
     check did not run."""
     from ..inference.diagnostics.predictive import ALPHA
+    from ..inference.result.status import predictive_record
 
-    p = (cal.get("diagnostics") or {}).get("predictive")
-    if not isinstance(p, dict) or "names" not in p:
+    p = predictive_record(cal.get("diagnostics") or {})
+    if p is None:
         return None
     plt = pyplot()
     z, lim = np.asarray(p["z"], float), float(p["z_limit"])
@@ -286,7 +287,7 @@ def predictive_figure(cal: dict, cls: str):
     with figure_style():
         fig, ax = plt.subplots(figsize=(PAGE_WIDTH_IN, 0.28 * n + 1.3))
         y = np.arange(n)[::-1]
-        beyond = np.abs(z) > lim
+        beyond = np.isin(p["names"], p["flagged"])
         ax.barh(y, z, color=colour(cls), height=0.7)
         if beyond.any():
             ax.barh(y[beyond], z[beyond], color="none", edgecolor="k", hatch="//", height=0.7,

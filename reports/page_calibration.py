@@ -13,7 +13,8 @@ import numpy as np
 
 from . import figures
 from .markup import Figures, Html, details, img, table, td
-from ..inference.result.status import MISFIT, NOT_CHECKED, OUT_OF_RANGE, calibration_status, run_facts
+from ..inference.result.status import (MISFIT, NOT_CHECKED, OUT_OF_RANGE, STATISTICS_UNITS, calibration_status,
+                                       predictive_record, run_facts)
 from .numbers import column_decimals, fmt
 from .verdicts import FAR, nuisances
 
@@ -103,15 +104,14 @@ def _predictive_text(st, d: dict, w: Html, key: str) -> str:
 
 def _predictive_table(d: dict) -> str:
     """The predictive check statistic by statistic ('' where it did not run), folded with the lines."""
-    p = d.get("predictive")
-    if not isinstance(p, dict) or "names" not in p:
+    p = predictive_record(d)
+    if p is None:
         return ""
     rows = [[td(html.escape(n), False), td(fmt(o, 3)), td(f"{fmt(m, 3)} &plusmn; {fmt(sd, 3)}"), td(fmt(z, 1)),
              td(fmt(q, 2))] for n, o, m, sd, z, q in zip(p["names"], p["observed"], p["mean"], p["sd"], p["z"],
                                                           p["quantile"])]
-    marks = ["warn" if abs(z) > p["z_limit"] else "" for z in p["z"]]
-    return (f"<p>The posterior predictive check, statistic by statistic (log10 of the peak-normalised profile, "
-            f"folded; spreads: the cube root of the variance over the measurements; beyond |z| = "
+    marks = ["warn" if n in p["flagged"] else "" for n in p["names"]]
+    return (f"<p>The posterior predictive check, statistic by statistic ({STATISTICS_UNITS}; beyond |z| = "
             f"{fmt(p['z_limit'], 1)}: a misfit):</p>"
             + table(["statistic", "measured", "predictive mean &plusmn; sd", "z", "predictive quantile"], rows,
                     marks))

@@ -10,7 +10,7 @@ from mdaug.generator import load_reference
 from mdaug.generator.acquisition import Acquisition
 from mdaug.generator.specimens import SpecimenSpread
 from mdaug.inference.amortized.simulate import measure
-from mdaug.inference.diagnostics.predictive import BANDS, predictive_check, statistics, z_limit
+from mdaug.inference.diagnostics.predictive import BANDS, PredictiveCheck, predictive_check, statistics, z_limit
 from mdaug.inference.result.status import FITS, MISFIT
 from mdaug.radar import RadarConfig
 
@@ -125,7 +125,8 @@ def test_the_reports_figure_marks_the_statistics_beyond_the_limit():
 
     assert predictive_figure({"diagnostics": {}}, "HELI") is None
     names = ["band 1-2 bins: mean", "band 81-199 bins: mean", "line 1 (4 bins)"]
-    p = {"names": names, "z": [0.5, -6.0, 4.0], "z_limit": 3.0, "n_draws": 200, "n_measurements": 5}
+    p = PredictiveCheck(names=names, observed=[0.0] * 3, mean=[0.0] * 3, sd=[1.0] * 3, z=[0.5, -6.0, 4.0],
+                        quantile=[0.5] * 3, z_limit=3.0, n_draws=200, n_measurements=5).to_dict()
     fig = predictive_figure({"diagnostics": {"predictive": p}}, "HELI")
     ax = fig.axes[0]
     assert [t.get_text() for t in ax.get_yticklabels()] == names

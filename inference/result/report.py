@@ -7,6 +7,8 @@ import numpy as np
 from ..samplers.smc import describe_route_knobs
 from .status import (
     BEST_FIT_BESIDE,
+    STATISTICS_UNITS,
+    predictive_record,
     best_fit_beside,
     calibration_status,
     chain_words,
@@ -112,8 +114,8 @@ def amortized_report(res, identified_ratio: float) -> str:
                     "median fits the prior)"
                     if d.get("best_fit_median") == "component-wise" else ""))
     lines += calibration_status(res).lines()
-    if isinstance(d.get("predictive"), dict) and "names" in d["predictive"]:
-        lines.append(predictive_table(d["predictive"]))
+    if predictive_record(d) is not None:
+        lines.append(predictive_table(predictive_record(d)))
     if d.get("widths"):
         lines.append("label-free quantities (the lines sorted by frequency; rad/s and m): median, 90% interval, "
                      "its width / median, and the Cramer-Rao bound's 90% width / median for these measurements")
@@ -139,10 +141,9 @@ def predictive_table(p: dict) -> str:
     import pandas as pd
 
     rows = {n: {"data": o, "predictive mean": m, "sd": sd, "z": z, "quantile": q,
-                "": "beyond the limit" if abs(z) > p["z_limit"] else ""}
+                "": "beyond the limit" if n in p["flagged"] else ""}
             for n, o, m, sd, z, q in zip(p["names"], p["observed"], p["mean"], p["sd"], p["z"], p["quantile"])}
     with pd.option_context("display.width", 140, "display.max_rows", 500):
         table = pd.DataFrame(rows).T.to_string(float_format=lambda v: f"{v:.3f}")
-    return ("posterior predictive check, statistic by statistic (log10 of the peak-normalised profile, folded; "
-            "spreads: cube root of the variance over the measurements)\n" + table)
+    return f"posterior predictive check, statistic by statistic ({STATISTICS_UNITS})\n" + table
 

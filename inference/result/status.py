@@ -347,12 +347,24 @@ def calibration_status(source) -> CalibrationStatus:
                              check_convergence=check[1], check_detail=check[2],
                              check_role=smc_role(d) if check[0] else "",
                              users=(d.get("estimator") or {}).get("users") if amortized else None,
-                             **_predictive(d.get("predictive")))
+                             **_predictive(predictive_record(d)))
+
+
+def predictive_record(d: dict) -> dict | None:
+    """The posterior predictive check's record in diagnostics ``d`` (its statistics, z, the
+    limit, ``flagged`` and ``word``), or None where no check ran."""
+    p = d.get("predictive") if isinstance(d, dict) else None
+    return p if isinstance(p, dict) and p.get("word") in (FITS, MISFIT) else None
+
+
+STATISTICS_UNITS = ("log10 of the peak-normalised profile, folded; spreads: the cube root of the variance over the "
+                    "measurements")
+"""What the predictive check's statistics are in, as its tables say it."""
 
 
 def _predictive(p) -> dict:
     """The predictive check's word and facts from its record (None: not checked)."""
-    if not isinstance(p, dict) or p.get("word") not in (FITS, MISFIT):
+    if p is None:
         return {"predictive": NOT_CHECKED, "predictive_facts": ""}
     n, top = len(p["names"]), max(abs(z) for z in p["z"])
     facts = (f"{n} statistics of the measurements against {p['n_draws']} posterior draws measured "
