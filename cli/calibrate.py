@@ -238,10 +238,11 @@ def run_calibrate(args) -> int:
         from ..inference.compare import select_engines
 
         res = select_engines(profiles, args.class_name.upper(), settings=settings, random_state=args.seed,
-                             backend_path=backend, acquisition=acquisition)
+                             backend_path=backend, acquisition=acquisition, predictive=args.predictive)
     else:
         res = calibrate(profiles, args.class_name.upper(), engines=args.engines, settings=settings,
-                        acquisition=acquisition, random_state=args.seed, backend_path=backend)
+                        acquisition=acquisition, random_state=args.seed, backend_path=backend,
+                        **predictive_draws(args))
     res.record_specimens(drones)
     if res.diagnostics.get("resumed_at") or res.diagnostics.get("fit_reused"):
         result(f"resumed from {backend}: fit reused, sampler continued at step {res.diagnostics.get('resumed_at', 0)}")

@@ -45,7 +45,6 @@ def calibration_method(args, acquisition) -> str:
                              "calibration (the default for measured acquisitions) has no such setting")
     else:
         given = [o for o, v in (("--estimator", args.estimator), ("--route", args.route),
-                                ("--predictive", getattr(args, "predictive", None)),
                                 ("--route-knob", getattr(args, "route_knob", None)),
                                 ("--check-route", args.check_route or None)) if v is not None]
         if given:
@@ -54,7 +53,7 @@ def calibration_method(args, acquisition) -> str:
 
 
 def predictive_draws(args) -> dict:
-    """``calibrate_amortized``'s ``predictive`` from ``--predictive`` (absent: its default)."""
+    """A calibration's ``predictive`` (either method) from ``--predictive`` (absent: its default)."""
     return {} if getattr(args, "predictive", None) is None else {"predictive": int(args.predictive)}
 
 

@@ -62,6 +62,7 @@ def run_population(args, profiles, drones, settings, acquisition, method: str = 
     from ..inference.result.posterior import CalibrationResult
     from ..radar import RadarConfig
     from ..radar.seeds import child_seed
+    from .calibrate_amortized import predictive_draws
 
     if args.engines == "auto" and method != "amortized":
         raise ValueError("--population calibrates every drone with one engine count: give --engines N, not auto")
@@ -93,15 +94,14 @@ def run_population(args, profiles, drones, settings, acquisition, method: str = 
             info(f"drone {drone} ({k + 1} of {len(ids)}): calibrating from {len(rows)} profile(s)")
             if method == "amortized":
                 from ..inference.amortized.calibrate import calibrate_amortized
-                from .calibrate_amortized import predictive_draws
-
                 res = calibrate_amortized(rows, cls, acquisition=acquisition, estimator=args.estimator,
                                           settings=settings, random_state=seed, route=args.route, fit=False,
                                           source=f"{args.measured} (drone {drone})",
                                           **predictive_draws(args)).record_specimens([drone])
             else:
                 res = calibrate(rows, cls, engines=args.engines, settings=settings, acquisition=acquisition,
-                                random_state=seed, backend_path=Path(f"{path}.chain.h5")).record_specimens([drone])
+                                random_state=seed, backend_path=Path(f"{path}.chain.h5"),
+                                **predictive_draws(args)).record_specimens([drone])
             res.meta[REUSE_FIELD] = key  # what a rerun must match to reuse this posterior
             res.idata.posterior.attrs["mdaug"] = json.dumps(res.meta)
             res.save(path)

@@ -26,7 +26,8 @@ from ..generator import IDX, N_PARAMS, ClassParams, load_reference
 from ..generator.acquisition import Acquisition
 from ..generator.magnitude import carrier_line_factor
 from ..radar import RadarConfig, atomic_write
-from ..radar.seeds import seed_sequence
+from ..radar.seeds import child_seed, seed_sequence
+from .diagnostics.predictive import N_DRAWS, timed_check
 from .samplers.toolbox import fingerprint
 from .fit import FitResult, global_fit
 from .likelihood.closed_form import ClosedFormLikelihood
@@ -92,7 +93,8 @@ def make_likelihood(data: np.ndarray, ref: ClassParams, n_engines: int, acquisit
 
 def calibrate(profiles, reference, *, engines: int | None = None, acquisition: Acquisition | None = None,
               settings: CalibrationSettings = CalibrationSettings(), random_state=None, backend_path=None,
-              priors: Priors | None = None, radar: RadarConfig = RadarConfig()) -> CalibrationResult:
+              priors: Priors | None = None, radar: RadarConfig = RadarConfig(),
+              predictive: int = N_DRAWS) -> CalibrationResult:
     """Calibrate one class from its measured profiles.
 
     profiles: (n, L) or (L,) linear-magnitude measured profiles of one class (a
@@ -103,7 +105,10 @@ def calibrate(profiles, reference, *, engines: int | None = None, acquisition: A
     (:class:`~mdaug.generator.acquisition.Acquisition`; None = the published single
     chirp). backend_path: checkpoint of the sampler (an interrupted run with the same
     arguments resumes from it). priors: override the reference-derived
-    :class:`Priors`.
+    :class:`Priors`. predictive: posterior draws measured for the posterior predictive
+    check (:mod:`.diagnostics.predictive`, ``diagnostics['predictive']``; 0: none), run
+    where the phases are marginalised (the acquisition draws them, as the replicates
+    do); a fitted-phase posterior is not checked.
     """
     ref = load_reference(reference) if isinstance(reference, str) else reference
     settings = settings if settings is not None else CalibrationSettings()
@@ -118,8 +123,14 @@ def calibrate(profiles, reference, *, engines: int | None = None, acquisition: A
     ss = seed_sequence(random_state)
     lik_ss, run_ss = ss.spawn(2)
     post = make_likelihood(data, ref, n_eng, acquisition, settings, lik_ss, priors, radar)
-    return run_calibration(post, ref, settings, run_ss, start_vector(ref, n_eng), backend_path=backend_path,
-                           shifts=shifts)
+    res = run_calibration(post, ref, settings, run_ss, start_vector(ref, n_eng), backend_path=backend_path,
+                          shifts=shifts)
+    if predictive and res.marginal:
+        peak, _ = prepare_measured(profiles, radar, "peak", what=f"measured profiles of class {ref.name}")
+        lines = np.median(res.lines(by_brightness=True)[:, 0, :, 0], axis=0)  # the brightest engine's, sorted
+        res.record_diagnostics(predictive=timed_check(res.draws(), peak, res.measured_acquisition(), radar, lines,
+                                                      predictive, child_seed(ss, "predictive")))
+    return res
 
 
 def _fit_path(backend_path) -> Path | None:

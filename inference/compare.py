@@ -24,9 +24,10 @@ DSE_RULE = 2.0
 
 
 def select_engines(profiles, ref, *, candidates=(1, 2, 4), settings=None, random_state=None, backend_path=None,
-                   priors=None, radar=None, acquisition=None) -> CalibrationResult:
+                   priors=None, radar=None, acquisition=None, predictive: int | None = None) -> CalibrationResult:
     """Calibrate every candidate engine count, compare by LOO, return the chosen
-    result with the comparison table in ``result.comparison`` (list of dicts)."""
+    result with the comparison table in ``result.comparison`` (list of dicts).
+    predictive: ``calibrate``'s (None: its default), run on every candidate."""
     from .calibrate import calibrate, seed_sequence
 
     cands = sorted({int(c) for c in candidates})
@@ -36,7 +37,7 @@ def select_engines(profiles, ref, *, candidates=(1, 2, 4), settings=None, random
     results = {}
     for e, ss in zip(cands, seeds):
         bp = None if backend_path is None else Path(f"{backend_path}.e{e}")
-        kw = {} if radar is None else {"radar": radar}
+        kw = ({} if radar is None else {"radar": radar}) | ({} if predictive is None else {"predictive": predictive})
         results[e] = calibrate(profiles, ref, engines=e, settings=settings, random_state=ss, backend_path=bp,
                                priors=priors, acquisition=acquisition, **kw)
     table = compare_results(results)

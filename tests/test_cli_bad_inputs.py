@@ -251,8 +251,6 @@ CASES = [
     ("cal-predictive-word", [*CAL, "--predictive", "many"], ["argument --predictive", "0, or an integer from 20"]),
     ("cal-predictive-5", [*CAL, "--predictive", "5"], ["--predictive: expected 0 (no check) or at least 20 draws, "
                                                        "got 5"]),
-    ("cal-predictive-closed-form", [*CAL, "--method", "likelihood", "--predictive", "100"],
-     ["--predictive applies to --method amortized"]),
     ("cal-out-missing-folder", ["calibrate", "{d}/m.npz", "--class", "HELI", "--out", "{o}/no/p.nc"],
      ["p.nc: cannot write"]),
     ("cal-corner-missing-folder", [*CAL, "--corner", "{o}/no/c.png"], ["c.png: cannot write"]),

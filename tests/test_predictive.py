@@ -136,3 +136,36 @@ def test_the_reports_figure_marks_the_statistics_beyond_the_limit():
     import matplotlib.pyplot as plt
 
     plt.close(fig)
+
+
+def test_the_closed_form_route_is_checked_where_it_marginalises_the_phases(drone, tiny_posterior, tmp_path):
+    """The closed-form likelihood's posterior gets the same check, kept in its file and said
+    by its status and report; a fitted-phase posterior (the published chirp) is not checked."""
+    import warnings
+
+    from mdaug.inference.calibrate import calibrate
+    from mdaug.inference.result.posterior import CalibrationResult
+    from mdaug.inference.result.status import NOT_CHECKED, calibration_status
+    from mdaug.inference.settings import CalibrationSettings
+
+    x, acq, y = drone
+    tiny = CalibrationSettings.quick(max_steps=20, fit_budget=50, n_starts=1, polish_budget=50, check_every=10)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = calibrate(y, "HELI", acquisition=acq, settings=tiny, random_state=0, predictive=40)
+        unchecked = calibrate(y, "HELI", acquisition=acq, settings=tiny, random_state=0, predictive=0)
+    p = res.diagnostics["predictive"]
+    assert res.marginal and p["n_draws"] == 40 and p["n_measurements"] == 5 and len(p["names"]) == 14
+    assert p["word"] in (FITS, MISFIT) and p["seconds"] > 0
+    assert p["names"][-4:] == [n for n in p["names"] if n.startswith("line ")]  # the brightest engine's four lines
+    np.testing.assert_allclose(res.draws(), unchecked.draws())  # the check draws from its own stream
+    assert "predictive" not in unchecked.diagnostics
+    res.save(tmp_path / "p.nc")
+    back = CalibrationResult.load(tmp_path / "p.nc")
+    assert back.diagnostics["predictive"]["z"] == p["z"]
+    st = calibration_status(back)
+    assert st.predictive == p["word"] and "14 statistics of the measurements against 40" in st.predictive_facts
+    assert "posterior predictive check, statistic by statistic" in back.report()
+    assert calibration_status(unchecked).predictive == NOT_CHECKED
+    fitted = CalibrationResult.load(tiny_posterior)  # the published chirp: phases fitted, no replicates drawn
+    assert not fitted.marginal and calibration_status(fitted).predictive == NOT_CHECKED

@@ -108,7 +108,8 @@ def population_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, n
             return {"i": i, "refused": str(exc), "seconds": time.perf_counter() - t0}
     else:
         results = [calibrate(camp.profiles[camp.specimen == d], ref, acquisition=camp.acquisition,
-                             settings=settings, random_state=seed_sequence(run_ss, d)) for d in range(n_drones)]
+                             settings=settings, random_state=seed_sequence(run_ss, d), predictive=0)
+                   for d in range(n_drones)]
     pop = calibrate_population(results, random_state=pop_ss)
     hyper = pop.spreads()
     pick = np.linspace(0, len(hyper) - 1, n_rank).round().astype(int)

@@ -84,7 +84,7 @@ def sbc_replicate(ref: ClassParams, i: int, ss: np.random.SeedSequence, ramps: i
     truth = layout.shared_physics(z)[0]
     data = simulate_measurements(truth, n_measurements, acq, data_ss, scene, radar)
     t0 = time.perf_counter()
-    res = calibrate(data, ref, acquisition=acq, settings=settings, random_state=run_ss, radar=radar)
+    res = calibrate(data, ref, acquisition=acq, settings=settings, random_state=run_ss, radar=radar, predictive=0)
     draws = res.draws()
     pick = np.linspace(0, len(draws) - 1, n_rank).round().astype(int)
     q_true, names = sbc_quantities(truth)

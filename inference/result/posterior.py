@@ -196,6 +196,13 @@ class CalibrationResult:
         self.idata.posterior.attrs["mdaug"] = json.dumps(self.meta)
         return self
 
+    def record_diagnostics(self, **items) -> "CalibrationResult":
+        """Add ``items`` to the diagnostics (kept in the file), e.g. a check run on the
+        finished posterior."""
+        self.meta["diagnostics"].update(items)
+        self.idata.posterior.attrs["mdaug"] = json.dumps(self.meta)
+        return self
+
     @property
     def fit(self) -> dict:
         return self.meta["fit"]

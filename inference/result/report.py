@@ -56,6 +56,8 @@ def report(res, identified_ratio: float) -> str:
                      f"min ESS {d['ess_min']:.0f}, acceptance {d['acceptance_mean']:.2f}, "
                      f"burn {d['burn']}, thin {d['thin']}")
     lines += calibration_status(res).lines()
+    if predictive_record(d) is not None:
+        lines.append(predictive_table(predictive_record(d)))
     if d.get("weak_engines"):
         lines.append(f"WARNING: engine(s) {d['weak_engines']} stay near their prior (too weak to identify)")
     unid = [k for k, v in d["identified"].items() if not v]

@@ -26,7 +26,8 @@ The facts and their words:
   ``diagnostics['predictive']``): ``fits`` (the measurements are like those the
   posterior's drones make), ``misfit`` (some statistic of them lies beyond the check's
   limit: the posterior does not explain them, whatever its SBC says) or ``not checked``
-  (the closed-form route, files of earlier releases, ``--predictive 0``).
+  (the closed form's fitted-phase posteriors of the published chirp, files of earlier
+  releases, ``--predictive 0``).
 """
 from __future__ import annotations
 

@@ -1,13 +1,17 @@
 """How often does the posterior predictive check flag measurements, when the simulator made them and when it did not?
 
 python tests/benchmarks/predictive_check.py --class HELI --ramps 32 [--drones 40] [--measurements 5]
-    [--scenes matched,snr0,snr25,drift] [--seed 0] [--workers 1] [--out FILE.json]
+    [--scenes matched,snr0,snr25,drift] [--seed 0] [--workers 1] [--method likelihood --time-budget 120]
+    [--out FILE.json]
 
 Drones are drawn as the default study draws new drones (the specimen model around the class
 reference). Each is measured ``--measurements`` times under the shipped estimator's
 acquisition, once per scene, with the same random numbers, and calibrated by the file's
 default route with its predictive check (``mdaug calibrate``'s default,
-:mod:`mdaug.inference.diagnostics.predictive`). Scenes:
+:mod:`mdaug.inference.diagnostics.predictive`), or with ``--method likelihood`` by the
+closed-form likelihood (nlopt from one start of 2,000 evaluations, then emcee for
+``--time-budget`` seconds a drone: the default fit, 4 starts of 6,000, takes minutes a
+drone). Scenes:
 
 * ``matched``: the scene the estimators are trained on (the flag rate is the check's false
   alarms; at most its level, 0.01, is the design);
@@ -47,6 +51,8 @@ def one_drone(job: dict) -> list[dict]:
     from mdaug.inference.amortized.estimator import EstimatorError
     from mdaug.inference.amortized.shipped import find
     from mdaug.inference.amortized.simulate import measure
+    from mdaug.inference.calibrate import calibrate
+    from mdaug.inference.settings import CalibrationSettings
     from mdaug.radar import RadarConfig
     from mdaug.radar.seeds import seed_sequence
 
@@ -63,15 +69,21 @@ def one_drone(job: dict) -> list[dict]:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             try:
-                res = calibrate_amortized(y, ref, acquisition=acq, estimator=est, random_state=seed_sequence(
-                    job["seed"], "calibrate", job["i"]), fit=False)
+                if job["method"] == "likelihood":
+                    quick_fit = CalibrationSettings(time_budget=job["budget"], n_starts=1, fit_budget=2000)
+                    res = calibrate(y, ref, acquisition=acq, settings=quick_fit,
+                                    random_state=seed_sequence(job["seed"], "calibrate", job["i"]))
+                else:
+                    res = calibrate_amortized(y, ref, acquisition=acq, estimator=est, random_state=seed_sequence(
+                        job["seed"], "calibrate", job["i"]), fit=False)
             except EstimatorError as exc:  # refused outright: as far out as data get
                 out.append({"scene": name, "refused": str(exc)})
                 continue
         d = res.diagnostics
         p = d["predictive"]
         out.append({"scene": name, "word": p["word"], "max_z": float(np.max(np.abs(p["z"]))),
-                    "flagged": p["flagged"], "out_of_range": bool(d["out_of_range"]), "route": d["route"],
+                    "flagged": p["flagged"], "out_of_range": bool(d.get("out_of_range", False)),
+                    "route": d.get("route", "likelihood"), "converged": bool(d["converged"]),
                     "check_seconds": p["seconds"], "seconds": time.perf_counter() - t0})
     return out
 
@@ -89,7 +101,7 @@ def table(records: list[dict], scenes) -> list[str]:
     import numpy as np
 
     lines = [f"{'scene':9s} {'drones':>6s} {'misfit':>7s} {'95% interval':>14s} {'median max|z|':>14s} "
-             f"{'out of range':>12s} {'check s':>8s} {'calib s':>8s}  most flagged"]
+             f"{'out of range':>12s} {'converged':>9s} {'check s':>8s} {'calib s':>8s}  most flagged"]
     for name in scenes:
         rs = [r for r in records if r["scene"] == name and "word" in r]
         refused = sum(1 for r in records if r["scene"] == name and "refused" in r)
@@ -99,6 +111,7 @@ def table(records: list[dict], scenes) -> list[str]:
         lines.append(f"{name:9s} {len(rs):6d} {k / max(len(rs), 1):7.2f} {f'[{lo:.2f}, {hi:.2f}]':>14s} "
                      f"{np.median([r['max_z'] for r in rs]):14.1f} "
                      f"{np.mean([r['out_of_range'] for r in rs]):12.2f} "
+                     f"{np.mean([r.get('converged', True) for r in rs]):9.2f} "
                      f"{np.median([r['check_seconds'] for r in rs]):8.1f} {np.median([r['seconds'] for r in rs]):8.1f}"
                      f"  {most[0][0] + f' ({most[0][1]})' if most else '-'}"
                      + (f"; {refused} refused by the estimator" if refused else ""))
@@ -114,14 +127,17 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", default="matched,snr0,snr25,drift")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--method", default="amortized", choices=("amortized", "likelihood"),
+                    help="the shipped file's default route, or the closed-form likelihood")
+    ap.add_argument("--time-budget", type=float, default=120.0, help="--method likelihood: seconds a drone")
     ap.add_argument("--out", default=None)
     a = ap.parse_args(argv)
     scenes = a.scenes.split(",")
     bad = [s for s in scenes if s not in SCENES]
     if bad:
         ap.error(f"--scenes: unknown {bad}; expected some of {', '.join(SCENES)}")
-    jobs = [{"cls": a.cls, "ramps": a.ramps, "m": a.measurements, "seed": a.seed, "i": i, "scenes": scenes}
-            for i in range(a.drones)]
+    jobs = [{"cls": a.cls, "ramps": a.ramps, "m": a.measurements, "seed": a.seed, "i": i, "scenes": scenes,
+             "method": a.method, "budget": a.time_budget} for i in range(a.drones)]
     if a.workers > 1:
         from concurrent.futures import ProcessPoolExecutor
 
@@ -130,7 +146,8 @@ def main(argv=None) -> int:
     else:
         records = [r for job in jobs for r in one_drone(job)]
     print(f"{a.cls} K = {a.ramps}: {a.drones} drones of the specimen model, {a.measurements} measurements each, "
-          f"the shipped file's default route, seed {a.seed}")
+          + (f"the closed-form likelihood ({a.time_budget:g} s a drone)" if a.method == "likelihood" else
+             "the shipped file's default route") + f", seed {a.seed}")
     print("\n".join(table(records, scenes)))
     if a.out:
         with open(a.out, "w") as f:
