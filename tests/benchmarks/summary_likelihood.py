@@ -56,6 +56,15 @@ def table(rows: dict, names: list[str], crb: dict | None = None) -> str:
     return "\n".join(lines)
 
 
+def shard_seed(folder: str):
+    """The seed the shards in ``folder`` were simulated with (its ``simulation.json``; None
+    where it does not say), kept in the file so that its training drones can be made again."""
+    try:
+        return json.loads(json.loads(open(os.path.join(folder, "simulation.json")).read())["key"])["seed"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 def main(argv=None) -> int:
     import numpy as np
     import torch
@@ -125,7 +134,8 @@ def main(argv=None) -> int:
         config = EmulatorConfig(n_widening=0) if a.no_widening else EmulatorConfig()
         model, report = train_summary_model(np.concatenate(xs), np.concatenate(ys), lf, a.cls, est.spec.acquisition,
                                             est.spec.radar, config, seed=a.seed)
-        report.update(prior_drones=int(len(xs[0])), near_drones=int(len(xs[1])), near_width=4.0)
+        report.update(prior_drones=int(len(xs[0])), near_drones=int(len(xs[1])), near_width=4.0,
+                      simulation_seeds=[shard_seed(a.prior), shard_seed(a.near)])
         if a.save_model:
             meta, state = to_parts(model, report)
             torch.save(state, f"{a.save_model}.pt")
