@@ -52,8 +52,6 @@ def run_population(args, profiles, drones, settings, acquisition, method: str = 
     (:func:`mdaug.inference.population.result.calibrate_population`). ``method``
     "amortized": each drone's posterior is the trained estimator's (no smc route:
     the population uses the amortized draws), else the closed-form route."""
-    import json
-
     import numpy as np
 
     from ..inference.calibrate import calibrate
@@ -102,8 +100,7 @@ def run_population(args, profiles, drones, settings, acquisition, method: str = 
                 res = calibrate(rows, cls, engines=args.engines, settings=settings, acquisition=acquisition,
                                 random_state=seed, backend_path=Path(f"{path}.chain.h5"),
                                 **predictive_draws(args)).record_specimens([drone])
-            res.meta[REUSE_FIELD] = key  # what a rerun must match to reuse this posterior
-            res.idata.posterior.attrs["mdaug"] = json.dumps(res.meta)
+            res.record(**{REUSE_FIELD: key})  # what a rerun must match to reuse this posterior
             res.save(path)
             Path(f"{path}.chain.h5").unlink(missing_ok=True)
             Path(f"{path}.chain.h5.fit.json").unlink(missing_ok=True)

@@ -13,7 +13,6 @@ a candidate that did not converge is marked.
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -45,13 +44,8 @@ def select_engines(profiles, ref, *, candidates=(1, 2, 4), settings=None, random
     chosen = min(row["engines"] for row in ok)
     for row in table:
         row["chosen"] = row["engines"] == chosen
-    res = results[chosen]
-    meta = dict(res.meta)
-    meta["comparison"] = table
-    meta["comparison_rule"] = (f"smallest engine count whose elpd_loo is within {DSE_RULE} dse of the best "
-                               "(PSIS-LOO over bins)")
-    res.idata.posterior.attrs["mdaug"] = json.dumps(meta)
-    return CalibrationResult(res.idata)
+    rule = f"smallest engine count whose elpd_loo is within {DSE_RULE} dse of the best (PSIS-LOO over bins)"
+    return results[chosen].record(comparison=table, comparison_rule=rule)
 
 
 def compare_results(results: dict) -> list[dict]:

@@ -190,18 +190,21 @@ class CalibrationResult:
         """The drones (specimen ids) the measurements were of (["0"] when not recorded)."""
         return [str(v) for v in self.meta.get("specimens", ["0"])]
 
-    def record_specimens(self, ids) -> "CalibrationResult":
-        """Record which drones the measurements were of (kept in the file)."""
-        self.meta["specimens"] = sorted({str(v) for v in ids})
+    def record(self, **fields) -> "CalibrationResult":
+        """Set top-level metadata ``fields`` (kept in the file: the one place the
+        metadata is written back to the InferenceData)."""
+        self.meta.update(fields)
         self.idata.posterior.attrs["mdaug"] = json.dumps(self.meta)
         return self
+
+    def record_specimens(self, ids) -> "CalibrationResult":
+        """Record which drones the measurements were of (kept in the file)."""
+        return self.record(specimens=sorted({str(v) for v in ids}))
 
     def record_diagnostics(self, **items) -> "CalibrationResult":
         """Add ``items`` to the diagnostics (kept in the file), e.g. a check run on the
         finished posterior."""
-        self.meta["diagnostics"].update(items)
-        self.idata.posterior.attrs["mdaug"] = json.dumps(self.meta)
-        return self
+        return self.record(diagnostics={**self.meta["diagnostics"], **items})
 
     @property
     def fit(self) -> dict:
