@@ -30,7 +30,7 @@ import numpy as np
 
 from ...generator import IDX, N_PARAMS
 from ..space.layout import Layout
-from ..space.priors import PERMUTATIONS, Priors, align_lines, brightness_order, engine_lines
+from ..space.priors import PERMUTATIONS, Priors, align_lines, brightness_order, engine_lines, label_free_lines
 
 _PERMS = np.asarray(PERMUTATIONS)
 _EPS = 1e-9
@@ -81,12 +81,9 @@ class LabelFree:
         x = np.atleast_2d(np.asarray(x, float))
         n = len(x)
         xe = x.reshape(n, self.E, N_PARAMS)
-        w, a, _ = engine_lines(xe)
-        order = np.argsort(w, axis=-1)
-        w, a = np.take_along_axis(w, order, -1), np.take_along_axis(a, order, -1)
-        eng = brightness_order(xe)
-        w, a = np.take_along_axis(w, eng[..., None], 1), np.take_along_axis(a, eng[..., None], 1)
-        lng = np.log(np.take_along_axis(xe[..., IDX["Gamma"]], eng, 1))
+        lines = label_free_lines(xe, by_brightness=True)  # (n, E, 4, 2), the brightest engine first
+        w, a = lines[..., 0], lines[..., 1]
+        lng = np.log(np.take_along_axis(xe[..., IDX["Gamma"]], brightness_order(xe), 1))
         cols = []
         for k in range(self.E):
             cols += [w[:, k], a[:, k]]

@@ -55,9 +55,7 @@ def report(res, identified_ratio: float) -> str:
                      f"max tau {d['tau_max']:.0f} steps, chain/tau {d['steps_over_tau']:.1f}, "
                      f"min ESS {d['ess_min']:.0f}, acceptance {d['acceptance_mean']:.2f}, "
                      f"burn {d['burn']}, thin {d['thin']}")
-    lines += calibration_status(res).lines()
-    if predictive_record(d) is not None:
-        lines.append(predictive_table(predictive_record(d)))
+    lines += status_lines(res)
     if d.get("weak_engines"):
         lines.append(f"WARNING: engine(s) {d['weak_engines']} stay near their prior (too weak to identify)")
     unid = [k for k, v in d["identified"].items() if not v]
@@ -115,9 +113,7 @@ def amortized_report(res, identified_ratio: float) -> str:
                  + ("; best fit: the component-wise median of the draws (no labelling of their label-free "
                     "median fits the prior)"
                     if d.get("best_fit_median") == "component-wise" else ""))
-    lines += calibration_status(res).lines()
-    if predictive_record(d) is not None:
-        lines.append(predictive_table(predictive_record(d)))
+    lines += status_lines(res)
     if d.get("widths"):
         lines.append("label-free quantities (the lines sorted by frequency; rad/s and m): median, 90% interval, "
                      "its width / median, and the Cramer-Rao bound's 90% width / median for these measurements")
@@ -134,6 +130,13 @@ def amortized_report(res, identified_ratio: float) -> str:
     lines.append("units: m (amplitudes A), rad/s (angular frequencies w; f = w / 2 pi); sd_ratio: posterior sd / "
                  f"prior sd (identified at <= {identified_ratio})")
     return "\n".join(lines)
+
+
+def status_lines(res) -> list[str]:
+    """The status of ``res`` (:func:`.status.calibration_status`) and, where the posterior
+    predictive check ran, its table: what either route's report says of its verdicts."""
+    p = predictive_record(res.diagnostics)
+    return calibration_status(res).lines() + ([] if p is None else [predictive_table(p)])
 
 
 def predictive_table(p: dict) -> str:
