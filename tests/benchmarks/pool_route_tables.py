@@ -13,7 +13,8 @@ is not (its rows keep the range only), so it is rerun on each file's drones (``s
 that run's count, seed and workers; milliseconds a drone). Prints one row per route with its
 lowest coverages and the chance that an exact posterior's lowest coverage falls that low.
 --stack-weight W adds the stacked route (W x smc + (1 - W) x amortized, its row derived from the two
-routes' runs on the same drones); --fit-stacking OUT fits W on the pooled drones by the truth's log
+routes' runs on the same drones; W a number, or a file --fit-stacking wrote, whose weight and the record
+of how it was chosen then travel into --adopt's file); --fit-stacking OUT fits W on the pooled drones by the truth's log
 score and writes a copy of the first FILE that states it (meta field 'stacking').
 """
 from __future__ import annotations
@@ -36,6 +37,22 @@ def _run(text: str) -> tuple[str, int, int]:
         return path, int(seed), int(workers)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r}: expected FILE:SEED:WORKERS") from None
+
+
+def _weight(text: str) -> float | dict:
+    """--stack-weight: a number, or a file whose meta field 'stacking' states a fitted weight (that record)."""
+    try:
+        return float(text)
+    except ValueError:
+        pass
+    try:
+        stacking = json.loads(zipfile.ZipFile(text).read("meta.json")).get("stacking")
+    except (OSError, KeyError, zipfile.BadZipFile, ValueError) as exc:
+        raise argparse.ArgumentTypeError(f"{text}: neither a number nor an estimator file ({exc})") from None
+    if not isinstance(stacking, dict) or not isinstance(stacking.get("weight"), (int, float)):
+        raise argparse.ArgumentTypeError(f"{text}: meta field 'stacking' states no weight "
+                                         "(expected a file written by --fit-stacking)")
+    return stacking
 
 
 def _tarp(row: dict) -> str:
@@ -71,7 +88,7 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="+", type=_run, metavar="FILE:SEED:WORKERS")
-    ap.add_argument("--stack-weight", type=float, default=None,
+    ap.add_argument("--stack-weight", type=_weight, default=None, metavar="W|FILE",
                     help="also pool the stacked route at this weight of the smc route (derived from the two routes' "
                          "runs on each file's drones: mdaug.inference.diagnostics.stacking.stacked_row)")
     ap.add_argument("--adopt", default=None, metavar="OUT",
@@ -86,6 +103,9 @@ def main(argv=None) -> int:
     if a.adopt and (len(a.runs) != 1 or a.stack_weight is None):
         ap.error("--adopt takes one FILE and --stack-weight")
     torch.set_num_threads(1)
+    fitted = a.stack_weight if isinstance(a.stack_weight, dict) else {}  # how a given weight was chosen
+    if fitted:
+        a.stack_weight = float(fitted["weight"])
     metas = [json.loads(zipfile.ZipFile(path).read("meta.json")) for path, _, _ in a.runs]
     est = AmortizedEstimator.load(a.runs[0][0])
     lf = est.label_free
@@ -108,7 +128,8 @@ def main(argv=None) -> int:
         w = a.stack_weight if a.stack_weight is not None else stacking_weight(-log_smc, -log_amortized)
         stacked = [stacked_row(m["sbc"]["smc"], r, w) for m, r in zip(metas, amortized)]
         rows["stacked"] = _pool(stacked, lf.names, CDF_DRAWS)
-        print(f"stacking weight of the smc route: {w:.3f}" + (" (given)" if a.stack_weight is not None else
+        print(f"stacking weight of the smc route: {w:.3f}" + ((" (given" + (f": fitted on {fitted.get('drones')} drones, seeds {fitted.get('seeds')}" if fitted else "")
+                                                      + ")") if a.stack_weight is not None else
               f" (fitted: the truth's log score on the {len(log_smc)} pooled drones)"))
         if a.fit_stacking:
             est.meta["stacking"] = {
@@ -133,8 +154,7 @@ def main(argv=None) -> int:
                                          "python tests/benchmarks/pool_route_tables.py " + " ".join(sys.argv[1:]))
         sbc.pop("specimens", None)  # its rows have no stacked route: rerun them
         name_default_route(sbc)
-        est.meta["stacking"] = {"weight": w, **{k: v for k, v in (est.meta.get("stacking") or {}).items()
-                                                 if k != "weight"}}
+        est.meta["stacking"] = {**(fitted or est.meta.get("stacking") or {}), "weight": w}
         adopt_route_table(est)
         est.save(a.adopt)
         print(f"wrote {a.adopt}: default route {est.default_route} ({sbc['route_table']['default_by']})")
