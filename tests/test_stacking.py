@@ -99,6 +99,8 @@ def test_the_stacked_rows_widths_are_the_mixtures_where_both_routes_kept_their_d
     assert table["stacked"]["tarp_atc"] == pytest.approx(row["tarp_atc"])
     assert not any("draws" in r or "truths" in r for r in table.values())
     assert "width_over_truth" in trimmed_row({**table["stacked"], "verdict": "honest"})
+    narrow = rows[0.5]["coverage_by_quantity"]["theta"]["0.90"]  # a row keeps its least covered quantities
+    assert trimmed_row(table["smc"])["lowest_coverage"] == [["theta", narrow]] and narrow < 0.75
 
 
 def test_a_stacked_narrow_and_wide_route_is_honest_and_beats_both_where_the_weight_was_not_chosen():

@@ -49,6 +49,8 @@ def table(rows: dict, names: list[str], crb: dict | None = None) -> str:
     if crb:
         lines.append(f"{'CRB':10s} {'':13s} {'':6s} {'':10s} {'':9s} {'':5s} {'':7s}  "
                      + " ".join(f"{crb[n]:.2f}" for n in names))
+    lines += [f"lowest 90% coverage, {name}: " + ", ".join(f"{q} {c:.2f}" for q, c in r["lowest_coverage"])
+              for name, r in rows.items() if r.get("lowest_coverage")]
     lines.append("(* the route's own density at the truth; else a Gaussian fitted to its draws)")
     chance = next((r["exact_fail_chance"] for r in rows.values() if "exact_fail_chance" in r), None)
     if chance is not None:
