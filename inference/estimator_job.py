@@ -409,13 +409,14 @@ def trimmed_row(summary: dict) -> dict:
     """A route table row: the gate's figures, the log score, the widths, convergence, seconds,
     and the four quantities of lowest 90% coverage ('lowest_coverage': [name, coverage] pairs,
     where the run kept its per-quantity coverage)."""
+    from .diagnostics.routes import least_covered
+
     keep = ("outer_share", "coverage90_range", "tarp_atc", "log_score", "log_score_by", "log_score_gaussian",
             "width_over_truth", "converged_share", "n_replicates", "verdict", "exact_fail_chance", "weight",
             "derived_from")
     row = {k: summary[k] for k in keep if k in summary}
-    by_quantity = summary.get("coverage_by_quantity")
-    if by_quantity:
-        cov90 = sorted((float(c["0.90"]), q) for q, c in by_quantity.items())
-        row["lowest_coverage"] = [[q, c] for c, q in cov90[:4]]
+    lowest = least_covered(summary)
+    if lowest:
+        row["lowest_coverage"] = lowest
     row["seconds_median"] = float(np.median(summary["seconds"]))
     return row

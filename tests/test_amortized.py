@@ -586,6 +586,10 @@ def test_sbc_stored_prints_what_the_shipped_file_says_and_simulates_nothing(tmp_
     assert "QUAD K=32 default route: stacked (the only route that passes the gate on 200 prior drones)" in text
     table = next(line for line in text.splitlines() if line.startswith("QUAD K=32 route table on 200 drones: "))
     assert "amortized overconfident" in table and "smc overconfident" in table and "stacked honest" in table
+    smc = sorted((c["0.90"], q) for q, c in data["smc"]["coverage_by_quantity"].items())
+    assert smc[0][0] < 0.85  # the smc route fails the coverage rule; its printout names where
+    assert (f"QUAD K=32 smc: outer-10% share {data['smc']['outer_share']:.3f}" in text and
+            f"  least covered (90%): {smc[0][1]} {smc[0][0]:.2f}, {smc[1][1]} {smc[1][0]:.2f}," in text)
 
 
 def test_sbc_stored_alone_lists_every_shipped_file_by_its_default_route(capsys, tmp_path, refused):

@@ -136,6 +136,14 @@ def headline(summary: dict) -> str:
             + f"{summary['n_replicates']} truths" + noise_note(summary["n_replicates"], len(summary.get("names") or [])))
 
 
+def least_covered(summary: dict, k: int = 4) -> list[list]:
+    """The k quantities of lowest 90% coverage, [[name, coverage], ...] lowest first ([] where
+    the summary kept no per-quantity coverage): which quantities a failed coverage rule names."""
+    by_quantity = summary.get("coverage_by_quantity") or {}
+    cov90 = sorted((float(c["0.90"]), q) for q, c in by_quantity.items())
+    return [[q, c] for c, q in cov90[:k]]
+
+
 def score_by(row: dict) -> str:
     """' (exact)' or ' (Gaussian fit)': how a row's log score was taken (rows written
     before the exact score have no ``log_score_by``: theirs is the Gaussian's)."""
