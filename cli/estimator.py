@@ -309,8 +309,9 @@ def _print_sbc(cls: str, ramps: int, out: dict) -> None:
         if not isinstance(s, dict) or "coverage90_range" not in s:  # the route table's own record
             continue
         result(f"{cls} K={ramps} {route}: {headline(s)}")
-        if s["coverage90_range"][0] < COVERAGE_MIN and least_covered(s):  # which quantities fail the rule
-            result("  least covered (90%): " + ", ".join(f"{q} {c:.2f}" for q, c in least_covered(s)))
+        lowest = least_covered(s) if s["coverage90_range"][0] < COVERAGE_MIN else []
+        if lowest:  # which quantities fail the coverage rule
+            result("  least covered (90%): " + ", ".join(f"{q} {c:.2f}" for q, c in lowest))
         prior = s.get("prior_width_over_truth")  # the amortized route's SBC carries the prior's beside
         if "width_over_truth" in s:  # a stacked row derived from stored ranks alone has no draws to measure
             widths = " ".join(f"{k.split()[2][0]}{k.split()[1]}{k[-3:]} {v:.2f}" + (f"/{prior[k]:.2f}" if prior else "")

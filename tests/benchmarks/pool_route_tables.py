@@ -13,9 +13,10 @@ is not (its rows keep the range only), so it is rerun on each file's drones (``s
 that run's count, seed and workers; milliseconds a drone). Prints one row per route with its
 lowest coverages and the chance that an exact posterior's lowest coverage falls that low.
 --stack-weight W adds the stacked route (W x smc + (1 - W) x amortized, its row derived from the two
-routes' runs on the same drones; W a number, or a file --fit-stacking wrote, whose weight and the record
-of how it was chosen then travel into --adopt's file); --fit-stacking OUT fits W on the pooled drones by the truth's log
-score and writes a copy of the first FILE that states it (meta field 'stacking').
+routes' runs on the same drones; W a number, or a file --fit-stacking wrote, whose weight and the
+record of how it was chosen then travel into --adopt's file); --fit-stacking OUT fits W on the
+pooled drones by the truth's log score and writes a copy of the first FILE that states it (meta
+field 'stacking').
 """
 from __future__ import annotations
 
@@ -128,9 +129,11 @@ def main(argv=None) -> int:
         w = a.stack_weight if a.stack_weight is not None else stacking_weight(-log_smc, -log_amortized)
         stacked = [stacked_row(m["sbc"]["smc"], r, w) for m, r in zip(metas, amortized)]
         rows["stacked"] = _pool(stacked, lf.names, CDF_DRAWS)
-        print(f"stacking weight of the smc route: {w:.3f}" + ((" (given" + (f": fitted on {fitted.get('drones')} drones, seeds {fitted.get('seeds')}" if fitted else "")
-                                                      + ")") if a.stack_weight is not None else
-              f" (fitted: the truth's log score on the {len(log_smc)} pooled drones)"))
+        if a.stack_weight is None:
+            how = f"fitted: the truth's log score on the {len(log_smc)} pooled drones"
+        else:
+            how = f"given: fitted on {fitted.get('drones')} drones, seeds {fitted.get('seeds')}" if fitted else "given"
+        print(f"stacking weight of the smc route: {w:.3f} ({how})")
         if a.fit_stacking:
             est.meta["stacking"] = {
                 "weight": round(w, 3), "drones": int(len(log_smc)), "seeds": [seed for _, seed, _ in a.runs],
