@@ -46,14 +46,20 @@ def _weight(text: str) -> float | dict:
         return float(text)
     except ValueError:
         pass
+    from mdaug.inference.amortized.estimator import EstimatorError, check_stacking
+
     try:
-        stacking = json.loads(zipfile.ZipFile(text).read("meta.json")).get("stacking")
+        meta = json.loads(zipfile.ZipFile(text).read("meta.json"))
     except (OSError, KeyError, zipfile.BadZipFile, ValueError) as exc:
         raise argparse.ArgumentTypeError(f"{text}: neither a number nor an estimator file ({exc})") from None
-    if not isinstance(stacking, dict) or not isinstance(stacking.get("weight"), (int, float)):
+    if not isinstance(meta.get("stacking"), dict):
         raise argparse.ArgumentTypeError(f"{text}: meta field 'stacking' states no weight "
                                          "(expected a file written by --fit-stacking)")
-    return stacking
+    try:
+        check_stacking(meta, text)  # the weight in (0, 1), as a file's loader checks it
+    except EstimatorError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return meta["stacking"]
 
 
 def _tarp(row: dict) -> str:
